@@ -1,0 +1,488 @@
+"""Scene files: TOML schema, defaults, validation and `--set` overrides.
+
+A scene is read with the standard library's `tomllib`, checked against SCHEMA below and
+returned as a plain nested dict with every default filled in (the *resolved scene*). The
+resolved scene is what the solver reads and what every output file stores. Any problem is
+an `InputError` whose message names the key (`material.density`, `bc[1].group`, ...).
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from parsph.errors import InputError
+
+REQUIRED = object()
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key: its type, default (or REQUIRED) and an optional value check."""
+
+    kind: str  # "int" | "float" | "str" | "bool" | "vector" | "matrix" | "intlist" | "strlist" | "table"
+    default: Any = None
+    check: Callable[[Any], str | None] | None = None
+    doc: str = ""
+
+
+def positive(v):
+    return None if v > 0 else "must be > 0"
+
+
+def non_negative(v):
+    return None if v >= 0 else "must be >= 0"
+
+
+def one_of(*choices):
+    def check(v):
+        return None if v in choices else f"must be one of {', '.join(map(repr, choices))}"
+
+    return check
+
+
+def in_range(lo, hi, lo_open=False, hi_open=False):
+    def check(v):
+        ok_lo = v > lo if lo_open else v >= lo
+        ok_hi = v < hi if hi_open else v <= hi
+        if ok_lo and ok_hi:
+            return None
+        return f"must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+
+    return check
+
+
+KERNELS = ("cubic_spline", "wendland_c2", "spiky")
+MATERIALS = ("saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible")
+PROBE_QUANTITIES = ("displacement", "velocity", "position", "reaction", "force", "J", "von_mises")
+SNAPSHOT_FIELDS = PROBE_QUANTITIES + ("rank", "reference_position")
+
+
+def snapshot_fields(v):
+    unknown = [f for f in v if f not in SNAPSHOT_FIELDS]
+    if unknown:
+        return f"has unknown field(s) {unknown}; choose from {', '.join(SNAPSHOT_FIELDS)}"
+    return None if "position" in v else "must include 'position' (the snapshot geometry)"
+
+
+SECTIONS: dict[str, dict[str, Key]] = {
+    "scene": {
+        "name": Key("str", REQUIRED, doc="short name of the scene"),
+        "dimension": Key("int", REQUIRED, one_of(1, 2, 3), "1, 2 (plane strain) or 3"),
+        "description": Key("str", ""),
+        "source": Key("str", "", doc="paper and section the scene reproduces"),
+        "expected": Key("str", "", doc="the outcome the scene must show"),
+    },
+    "geometry": {
+        "parts": Key("table", REQUIRED, doc="array of shapes, united"),
+        "thickness": Key("float", 1.0, positive, "out-of-plane thickness in 2D [m]"),
+        "area": Key("float", 1.0, positive, "cross-section area in 1D [m^2]"),
+    },
+    "kernel": {
+        "type": Key("str", "wendland_c2", one_of(*KERNELS)),
+        "support": Key("float", 2.1, positive, "support radius / particle spacing"),
+        "neighbours": Key("int", 0, non_negative, "if > 0: per-particle support for this many neighbours"),
+    },
+    "material": {
+        "model": Key("str", REQUIRED, one_of(*MATERIALS)),
+        "density": Key("float", REQUIRED, positive, "reference density [kg/m^3]"),
+        "youngs_modulus": Key("float", None, positive, "[Pa]"),
+        "poisson_ratio": Key("float", None, in_range(-1.0, 0.5, True, True)),
+        "shear_modulus": Key("float", None, positive, "[Pa]"),
+        "bulk_modulus": Key("float", None, positive, "[Pa]"),
+    },
+    "formulation": {
+        "type": Key("str", "tlsph", one_of("tlsph")),
+        "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
+        "hourglass": Key("float", 50.0, non_negative, "hourglass coefficient alpha [G eq. 31]"),
+    },
+    "time": {
+        "end": Key("float", REQUIRED, positive, "end time [s]"),
+        "dt": Key("float", 0.0, non_negative, "fixed time step [s]; 0 = from the CFL condition"),
+        "cfl": Key("float", 0.3, in_range(0.0, 1.0, True), "safety factor of the CFL time step"),
+        "damping": Key("float", 0.0, non_negative, "mass-proportional damping rate [1/s]"),
+        "max_steps": Key("int", 0, non_negative, "stop after this many steps (0 = no limit)"),
+    },
+    "loads": {
+        "body_acceleration": Key("vector", None, doc="uniform body force per unit mass [m/s^2]"),
+    },
+    "output": {
+        "history_interval": Key("float", 0.0, non_negative, "simulated time between history rows; 0 = every history_every steps"),
+        "history_every": Key("int", 10, positive, "steps between history rows if history_interval is 0"),
+        "snapshot_interval": Key("float", 0.0, non_negative, "simulated time between snapshots; 0 = none but the last"),
+        "snapshot_fields": Key("strlist", ["position", "displacement", "velocity", "J", "von_mises", "rank"],
+                              snapshot_fields),
+        "progress_seconds": Key("float", 5.0, positive, "seconds between progress lines when not on a terminal"),
+    },
+}
+
+# Shapes of geometry.parts and the keys each one takes.
+PART_KEYS: dict[str, dict[str, Key]] = {
+    "box": {
+        "lower": Key("vector", REQUIRED), "upper": Key("vector", REQUIRED),
+        "spacing": Key("float", REQUIRED, positive),
+        "placement": Key("str", "cell", one_of("cell", "node")),
+    },
+    "random_patch": {
+        "lower": Key("vector", REQUIRED), "upper": Key("vector", REQUIRED),
+        "count": Key("int", REQUIRED, positive), "seed": Key("int", 0),
+        "lloyd_iterations": Key("int", 20, non_negative),
+    },
+    "cylinder": {
+        "base_center": Key("vector", REQUIRED), "radius": Key("float", REQUIRED, positive),
+        "length": Key("float", REQUIRED, positive), "spacing": Key("float", REQUIRED, positive),
+        "axis": Key("int", 2, one_of(0, 1, 2)),
+    },
+    "ring": {
+        "center": Key("vector", REQUIRED), "inner_radius": Key("float", REQUIRED, positive),
+        "outer_radius": Key("float", REQUIRED, positive), "spacing": Key("float", REQUIRED, positive),
+    },
+    "disk": {
+        "center": Key("vector", REQUIRED), "radius": Key("float", REQUIRED, positive),
+        "spacing": Key("float", REQUIRED, positive),
+    },
+}
+PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,)}
+
+BC_KEYS = {
+    "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement")),
+    "group": Key("str", REQUIRED),
+    "value": Key("vector", None, doc="velocity [m/s] or final displacement [m]"),
+    "components": Key("intlist", None, doc="constrained components (default: all)"),
+    "ramp": Key("float", 0.0, non_negative, "time over which the value ramps up from 0 [s]"),
+}
+INITIAL_KEYS = {
+    "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient")),
+    "group": Key("str", "all"),
+    "value": Key("vector", None, doc="velocity [m/s]"),
+    "omega": Key("vector", None, doc="angular velocity: [w] in 2D, [wx, wy, wz] in 3D [rad/s]"),
+    "gradient": Key("matrix", None, doc="displacement gradient H: u = H (X - center)"),
+    "center": Key("vector", None),
+}
+PROBE_KEYS = {
+    "name": Key("str", REQUIRED),
+    "group": Key("str", REQUIRED),
+    "quantity": Key("str", REQUIRED, one_of(*PROBE_QUANTITIES)),
+    "component": Key("int", -1, doc="vector component, -1 for the norm / scalar quantities"),
+    "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
+}
+GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
+TOP_LEVEL = tuple(SECTIONS) + ("groups", "bc", "initial", "probes")
+
+
+def _suggest(name: str, known) -> str:
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else f" (known keys: {', '.join(sorted(known))})"
+
+
+def _coerce(path: str, key: Key, value: Any, dim: int | None):
+    """Type-check one value; ints are accepted for floats."""
+    kind = key.kind
+
+    def bad(expected):
+        return InputError(f"{path} must be {expected}, got {value!r} ({type(value).__name__})")
+
+    if kind == "float":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad("a number")
+        value = float(value)
+        if not math.isfinite(value):
+            raise InputError(f"{path} must be finite, got {value!r}")
+    elif kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad("an integer")
+    elif kind == "str":
+        if not isinstance(value, str):
+            raise bad("a string")
+    elif kind == "bool":
+        if not isinstance(value, bool):
+            raise bad("true or false")
+    elif kind == "vector":
+        if not isinstance(value, list) or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in value
+        ):
+            raise bad("a list of numbers")
+        value = [float(x) for x in value]
+    elif kind == "matrix":
+        if not isinstance(value, list) or not all(isinstance(r, list) for r in value):
+            raise bad("a list of rows")
+        value = [_coerce(f"{path}[{i}]", Key("vector"), r, None) for i, r in enumerate(value)]
+    elif kind == "intlist":
+        if not isinstance(value, list) or not all(isinstance(x, int) and not isinstance(x, bool) for x in value):
+            raise bad("a list of integers")
+    elif kind == "strlist":
+        if not isinstance(value, list) or not all(isinstance(x, str) for x in value):
+            raise bad("a list of strings")
+    if key.check is not None:
+        problem = key.check(value)
+        if problem:
+            raise InputError(f"{path} {problem} (got {value!r})")
+    return value
+
+
+def _table(path: str, raw: Any, keys: dict[str, Key], dim: int | None) -> dict:
+    """Validate one table against `keys`, fill defaults, reject unknown keys."""
+    if not isinstance(raw, dict):
+        raise InputError(f"{path} must be a table, got {type(raw).__name__}")
+    out = {}
+    for name in raw:
+        if name not in keys:
+            where = f"{path}.{name}" if path else name
+            raise InputError(f"unknown key '{where}'{_suggest(name, keys)}")
+    for name, key in keys.items():
+        where = f"{path}.{name}" if path else name
+        if name in raw:
+            out[name] = raw[name] if key.kind == "table" else _coerce(where, key, raw[name], dim)
+        elif key.default is REQUIRED:
+            raise InputError(f"missing required key '{where}'")
+        else:
+            out[name] = copy.deepcopy(key.default)
+    return out
+
+
+def _vector_len(path: str, value, dim: int):
+    if value is not None and len(value) != dim:
+        raise InputError(f"{path} must have {dim} components for a {dim}D scene, got {len(value)}")
+
+
+def _array(path: str, raw: Any) -> list:
+    if raw is None:
+        return []
+    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+        raise InputError(f"{path} must be an array of tables ([[{path}]])")
+    return raw
+
+
+def _validate_parts(raw_parts, dim: int) -> list[dict]:
+    parts = []
+    for i, raw in enumerate(_array("geometry.parts", raw_parts)):
+        path = f"geometry.parts[{i}]"
+        shape = raw.get("shape", None)
+        if shape not in PART_KEYS:
+            if shape is None:
+                raise InputError(f"missing required key '{path}.shape' (one of {', '.join(PART_KEYS)})")
+            raise InputError(f"{path}.shape must be one of {', '.join(PART_KEYS)}, got {shape!r}")
+        if dim not in PART_DIMENSIONS[shape]:
+            raise InputError(f"{path}: shape '{shape}' is not available in {dim}D")
+        body = {k: v for k, v in raw.items() if k != "shape"}
+        part = {"shape": shape, **_table(path, body, PART_KEYS[shape], dim)}
+        for name, key in PART_KEYS[shape].items():
+            if key.kind == "vector":
+                _vector_len(f"{path}.{name}", part[name], dim)
+        if "lower" in part and any(lo >= hi for lo, hi in zip(part["lower"], part["upper"])):
+            raise InputError(f"{path}: lower must be < upper in every component")
+        if shape == "ring" and part["inner_radius"] >= part["outer_radius"]:
+            raise InputError(f"{path}.inner_radius must be < outer_radius")
+        parts.append(part)
+    if not parts:
+        raise InputError("geometry.parts is empty: a scene needs at least one shape ([[geometry.parts]])")
+    return parts
+
+
+def _validate_material(mat: dict, dim: int) -> None:
+    model = mat["model"]
+    if model == "neo_hookean_nearly_incompressible":
+        need, forbid = ("shear_modulus", "bulk_modulus"), ("youngs_modulus", "poisson_ratio")
+    else:
+        need, forbid = ("youngs_modulus", "poisson_ratio"), ("shear_modulus", "bulk_modulus")
+    for k in need:
+        if mat[k] is None:
+            raise InputError(f"missing required key 'material.{k}' for model '{model}'")
+    for k in forbid:
+        if mat[k] is not None:
+            raise InputError(f"material.{k} does not apply to model '{model}' (it takes {' and '.join(need)})")
+
+
+def _validate_groups(raw: Any, dim: int) -> dict:
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise InputError("groups must be a table of named groups ([groups.NAME])")
+    groups = {"all": {"all": True}}
+    for name, spec in raw.items():
+        path = f"groups.{name}"
+        if not isinstance(spec, dict):
+            raise InputError(f"{path} must be a table")
+        selectors = [k for k in spec if k != "invert"]
+        for k in selectors:
+            if k not in GROUP_SELECTORS:
+                raise InputError(f"unknown key '{path}.{k}'{_suggest(k, GROUP_SELECTORS + ('invert',))}")
+        if len(selectors) != 1:
+            raise InputError(f"{path} needs exactly one of {', '.join(GROUP_SELECTORS)}")
+        groups[name] = spec
+    return groups
+
+
+def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
+    groups = scene["groups"]
+
+    def check_group(path, name):
+        if name not in groups:
+            raise InputError(f"{path} names group '{name}', which is not defined{_suggest(name, groups)}")
+
+    scene["bc"] = []
+    for i, t in enumerate(_array("bc", raw.get("bc"))):
+        bc = _table(f"bc[{i}]", t, BC_KEYS, dim)
+        check_group(f"bc[{i}].group", bc["group"])
+        if bc["components"] is None:
+            bc["components"] = list(range(dim))
+        if any(c < 0 or c >= dim for c in bc["components"]) or not bc["components"]:
+            raise InputError(f"bc[{i}].components must be a non-empty list of integers in [0, {dim - 1}]")
+        if bc["type"] == "fixed":
+            if bc["value"] is not None:
+                raise InputError(f"bc[{i}]: a 'fixed' condition takes no value")
+            bc["value"] = [0.0] * dim
+        elif bc["value"] is None:
+            raise InputError(f"missing required key 'bc[{i}].value' for a '{bc['type']}' condition")
+        _vector_len(f"bc[{i}].value", bc["value"], dim)
+        scene["bc"].append(bc)
+
+    scene["initial"] = []
+    for i, t in enumerate(_array("initial", raw.get("initial"))):
+        ic = _table(f"initial[{i}]", t, INITIAL_KEYS, dim)
+        check_group(f"initial[{i}].group", ic["group"])
+        need = {"velocity": "value", "angular_velocity": "omega", "displacement_gradient": "gradient"}[ic["type"]]
+        if ic[need] is None:
+            raise InputError(f"missing required key 'initial[{i}].{need}' for type '{ic['type']}'")
+        if ic["type"] == "velocity":
+            _vector_len(f"initial[{i}].value", ic["value"], dim)
+        if ic["type"] == "angular_velocity":
+            if dim == 1:
+                raise InputError(f"initial[{i}]: angular_velocity needs a 2D or 3D scene")
+            _vector_len(f"initial[{i}].omega", ic["omega"], 1 if dim == 2 else 3)
+        if ic["type"] == "displacement_gradient" and (
+            len(ic["gradient"]) != dim or any(len(r) != dim for r in ic["gradient"])
+        ):
+            raise InputError(f"initial[{i}].gradient must be a {dim}x{dim} matrix")
+        if ic["center"] is None:
+            ic["center"] = [0.0] * dim
+        _vector_len(f"initial[{i}].center", ic["center"], dim)
+        scene["initial"].append(ic)
+
+    scene["probes"] = []
+    names = set()
+    for i, t in enumerate(_array("probes", raw.get("probes"))):
+        probe = _table(f"probes[{i}]", t, PROBE_KEYS, dim)
+        check_group(f"probes[{i}].group", probe["group"])
+        if probe["name"] in names:
+            raise InputError(f"probes[{i}].name '{probe['name']}' is used twice")
+        names.add(probe["name"])
+        if not -1 <= probe["component"] < dim:
+            raise InputError(f"probes[{i}].component must be -1 or in [0, {dim - 1}]")
+        scene["probes"].append(probe)
+
+
+def validate(raw: dict) -> dict:
+    """Check a raw scene dict and return the resolved scene (defaults filled in)."""
+    if not isinstance(raw, dict):
+        raise InputError("a scene must be a TOML table")
+    for name in raw:
+        if name not in TOP_LEVEL:
+            raise InputError(f"unknown key '{name}'{_suggest(name, TOP_LEVEL)}")
+    scene_raw = raw.get("scene")
+    if not isinstance(scene_raw, dict) or "dimension" not in scene_raw:
+        raise InputError("missing required key 'scene.dimension'")
+    scene: dict[str, Any] = {}
+    dim = None
+    for section, keys in SECTIONS.items():
+        scene[section] = _table(section, raw.get(section, {}), keys, dim)
+        if section == "scene":
+            dim = scene["scene"]["dimension"]
+    scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
+    _validate_material(scene["material"], dim)
+    _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
+    scene["groups"] = _validate_groups(raw.get("groups"), dim)
+    _validate_lists(scene, raw, dim)
+    return scene
+
+
+def parse_override(text: str) -> tuple[list[str | int], Any]:
+    """Parse a `--set key.path=value` override; the value is read as TOML, else as a string."""
+    if "=" not in text:
+        raise InputError(f"--set expects key.path=value, got '{text}'")
+    path, value_text = text.split("=", 1)
+    parts: list[str | int] = [p if not p.isdigit() else int(p) for p in path.strip().split(".")]
+    if not path.strip() or any(p == "" for p in parts):
+        raise InputError(f"--set: bad key path '{path}'")
+    try:
+        value = tomllib.loads(f"v = {value_text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = value_text
+    return parts, value
+
+
+def apply_override(raw: dict, parts: list[str | int], value: Any) -> None:
+    """Set raw[parts...] = value; arrays of tables are indexed by number (bc.0.ramp)."""
+    node: Any = raw
+    shown = ""
+    for depth, part in enumerate(parts):
+        last = depth == len(parts) - 1
+        shown = f"{shown}.{part}" if shown else str(part)
+        if isinstance(part, int):
+            if not isinstance(node, list) or part >= len(node):
+                raise InputError(f"--set {shown}: no such entry")
+            if last:
+                node[part] = value
+            node = node[part]
+        else:
+            if not isinstance(node, dict):
+                raise InputError(f"--set {shown}: parent is not a table")
+            if last:
+                node[part] = value
+            else:
+                node = node.setdefault(part, {})
+
+
+def load(path: str, overrides: list[str] = ()) -> dict:
+    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene."""
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except FileNotFoundError:
+        raise InputError(f"scene file not found: {path}") from None
+    except IsADirectoryError:
+        raise InputError(f"scene path is a directory, not a file: {path}") from None
+    except PermissionError:
+        raise InputError(f"scene file is not readable: {path}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"scene file {path} is not valid TOML: {exc}") from None
+    for text in overrides:
+        apply_override(raw, *parse_override(text))
+    return validate(raw)
+
+
+def to_json(scene: dict) -> str:
+    """The resolved scene as canonical JSON (stored in every output file)."""
+    return json.dumps(scene, sort_keys=True)
+
+
+@dataclass
+class Derived:
+    """Material constants derived from the resolved scene."""
+
+    lam: float
+    mu: float
+    bulk: float
+    youngs: float
+    wave_speed: float
+    extra: dict = field(default_factory=dict)
+
+
+def material_constants(material: dict) -> Derived:
+    """Lame constants, Young's modulus and P-wave speed of the scene's material."""
+    rho = material["density"]
+    if material["model"] == "neo_hookean_nearly_incompressible":
+        mu, k = material["shear_modulus"], material["bulk_modulus"]
+        lam = k - 2.0 * mu / 3.0
+        youngs = 9.0 * k * mu / (3.0 * k + mu)
+    else:
+        youngs, nu = material["youngs_modulus"], material["poisson_ratio"]
+        lam = youngs * nu / ((1 + nu) * (1 - 2 * nu))
+        mu = youngs / (2 * (1 + nu))
+        k = lam + 2.0 * mu / 3.0
+    return Derived(lam=lam, mu=mu, bulk=k, youngs=youngs, wave_speed=math.sqrt((lam + 2 * mu) / rho))

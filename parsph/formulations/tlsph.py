@@ -1,0 +1,138 @@
+"""Total-Lagrangian corrected SPH [G §2], [V §2.3]: the two compiled stages of a step.
+
+Stage 1, `kinematics_stress`: for each owned particle
+    F_i = I + sum_j (u_j - u_i) (x) g_ij                      [G eq. 17], [V eq. 9]
+    P_i = P(F_i), psi_i                                       (materials.elastic)
+and the stored product VP_i = V_i P_i that stage 2 reads for particles and ghosts.
+
+Stage 2, `forces`: the internal force in one of two forms,
+    pair form [G eq. 24]:   f_i = sum_j (V_i P_i g_ij - V_j P_j g_ji)
+    virtual work [V eq. 11]: f_i = -sum_{j in S_i + {i}} V_j P_j G_i(X_j),
+        with G_i(X_j) = g_ji and the self coefficient G_i(X_i) = -sum_k g_ik,
+which agree in exact arithmetic when F uses the symmetrised corrected gradient (they
+differ by summation order only); both conserve linear momentum. Optionally the hourglass
+force [G eq. 25-32], per pair, antisymmetric and along x_ij:
+    delta^i_ij = (F_i X_ij - x_ij) . x_ij / |x_ij|
+    f_i^HG = -sum_j c_ij (E_i delta^i_ij + E_j delta^j_ji) x_ij / |x_ij|,
+    c_ij = alpha/2 V_i V_j W_ij / |X_ij|^2.
+`compile_stages` makes both stages for one scene's switches (dimension, material, force
+form, hourglass on/off), captured as compile-time constants: a scene's machine code holds
+only the terms it uses. Compiled code is cached on disk per combination.
+"""
+
+from __future__ import annotations
+
+import math
+
+import functools
+
+import numpy as np
+from numba import njit
+
+from parsph.materials.elastic import det, stress
+
+
+@functools.lru_cache(maxsize=None)
+def compile_stages(dim: int, model: int, pair_form: bool, hourglass: bool):
+    """(kinematics_stress, forces) specialised for one scene's switches.
+
+    The switches are closure constants; the stage bodies are inlined, so branches on them
+    are folded away by the compiler.
+    """
+
+    @njit(cache=True)
+    def kinematics_stress(n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, psi):
+        """Stage 1 for particles 0..n-1; returns (strain energy, first inverted particle or -1)."""
+        return _kinematics(dim, model, n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, psi)
+
+    @njit(cache=True)
+    def forces(n, ptr, idx, g, g_rev, g_sum, dx, hgc, u, F, VP, youngs, f_int, f_hg):
+        """Stage 2 for particles 0..n-1: internal force f_int and, if enabled, f_hg."""
+        _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, u, F, VP, youngs,
+                f_int, f_hg)
+
+    return kinematics_stress, forces
+
+
+@njit(cache=True, inline="always")
+def _kinematics(dim, model, n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, psi):
+    P = np.empty((dim, dim))
+    S = np.empty((dim, dim))
+    C = np.empty((dim, dim))
+    Cinv = np.empty((dim, dim))
+    energy = 0.0
+    first_bad = -1
+    for i in range(n):
+        for a in range(dim):
+            for b in range(dim):
+                F[i, a, b] = 1.0 if a == b else 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            for a in range(dim):
+                du = u[j, a] - u[i, a]
+                for b in range(dim):
+                    F[i, a, b] += du * g[p, b]
+        e = stress(model, F[i], dim, lam, mu, bulk, P, S, C, Cinv)
+        if not math.isfinite(e) and first_bad < 0:
+            first_bad = i
+        psi[i] = e
+        energy += volume[i] * e
+        J[i] = det(F[i], dim)
+        for a in range(dim):
+            for b in range(dim):
+                VP[i, a, b] = volume[i] * P[a, b]
+    return energy, first_bad
+
+
+@njit(cache=True, inline="always")
+def _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, u, F, VP, youngs,
+            f_int, f_hg):
+    xij = np.empty(dim)
+    for i in range(n):
+        for a in range(dim):
+            f_int[i, a] = 0.0
+            if hourglass:
+                f_hg[i, a] = 0.0
+        if not pair_form:
+            for a in range(dim):
+                s = 0.0
+                for b in range(dim):
+                    s += VP[i, a, b] * g_sum[i, b]
+                f_int[i, a] = s
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            for a in range(dim):
+                s = 0.0
+                for b in range(dim):
+                    s -= VP[j, a, b] * g_rev[p, b]
+                    if pair_form:
+                        s += VP[i, a, b] * g[p, b]
+                f_int[i, a] += s
+            if hourglass:
+                r2 = 0.0
+                for a in range(dim):
+                    xij[a] = dx[p, a] + u[j, a] - u[i, a]
+                    r2 += xij[a] * xij[a]
+                r = math.sqrt(r2)
+                di = 0.0
+                dj = 0.0
+                for a in range(dim):
+                    fi = 0.0
+                    fj = 0.0
+                    for b in range(dim):
+                        fi += F[i, a, b] * dx[p, b]
+                        fj += F[j, a, b] * dx[p, b]
+                    di += (fi - xij[a]) * xij[a]
+                    dj += (fj - xij[a]) * xij[a]
+                c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / r2
+                for a in range(dim):
+                    f_hg[i, a] += c * xij[a]
+
+
+def hourglass_coefficients(rows, idx, dx, w, volume, measure, alpha: float) -> np.ndarray:
+    """c_ij = alpha/2 V_i (V_j W_ij) / |X_ij|^2 per pair [G eq. 32].
+
+    V_i is the particle's physical volume and V_j W_ij the kernel weight, which uses the
+    d-dimensional measure (area in 2D, length in 1D) so that the force is in newtons.
+    """
+    return 0.5 * alpha * volume[rows] * measure[idx] * w / np.einsum("pa,pa->p", dx, dx)

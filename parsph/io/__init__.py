@@ -1,0 +1,1 @@
+"""Output files: history time series and particle snapshots."""

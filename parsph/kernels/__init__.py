@@ -1,0 +1,1 @@
+"""SPH smoothing kernels (h is the compact support radius)."""

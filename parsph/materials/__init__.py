@@ -1,0 +1,1 @@
+"""Constitutive laws: stress and strain-energy density from the deformation gradient."""

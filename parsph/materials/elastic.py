@@ -1,0 +1,125 @@
+"""Hyperelastic laws evaluated per particle inside the compiled kernels.
+
+Each law takes F (dim x dim), writes the first Piola-Kirchhoff stress P = F S and returns
+the strain-energy density psi per unit reference volume. Missing dimensions (plane strain
+in 2D, uniaxial strain in 1D) are held at unit stretch, so 3D invariants such as tr C get
+(3 - dim) added. A law returns NaN for J <= 0 (an inverted particle), which the caller
+reports.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+SAINT_VENANT_KIRCHHOFF = 0
+NEO_HOOKEAN = 1
+NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE = 2
+MODEL_IDS = {
+    "saint_venant_kirchhoff": SAINT_VENANT_KIRCHHOFF,
+    "neo_hookean": NEO_HOOKEAN,
+    "neo_hookean_nearly_incompressible": NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE,
+}
+
+
+@njit(cache=True, inline="always")
+def det(A, dim):
+    if dim == 1:
+        return A[0, 0]
+    if dim == 2:
+        return A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+            - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+            + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+
+
+@njit(cache=True, inline="always")
+def inverse(A, dim, out):
+    """out = A^-1 for dim <= 3 (A not singular)."""
+    d = det(A, dim)
+    if dim == 1:
+        out[0, 0] = 1.0 / d
+    elif dim == 2:
+        out[0, 0] = A[1, 1] / d
+        out[0, 1] = -A[0, 1] / d
+        out[1, 0] = -A[1, 0] / d
+        out[1, 1] = A[0, 0] / d
+    else:
+        out[0, 0] = (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) / d
+        out[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) / d
+        out[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) / d
+        out[1, 0] = (A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]) / d
+        out[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) / d
+        out[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) / d
+        out[2, 0] = (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]) / d
+        out[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) / d
+        out[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / d
+
+
+@njit(cache=True, inline="always")
+def right_cauchy_green(F, dim, C):
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += F[k, a] * F[k, b]
+            C[a, b] = s
+
+
+@njit(cache=True, inline="always")
+def first_piola(F, S, dim, P):
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += F[a, k] * S[k, b]
+            P[a, b] = s
+
+
+@njit(cache=True, inline="always")
+def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
+    """P = F S for the law `model`; returns psi (NaN if J <= 0).
+
+    Saint Venant-Kirchhoff [G eq. 19] (with the standard lam tr(E) I term):
+        S = lam tr(E) I + 2 mu E,  psi = lam/2 tr(E)^2 + mu E:E,  E = (C - I)/2.
+    Compressible neo-Hookean [G eq. 44]:
+        S = mu (I - C^-1) + lam ln(J) C^-1,  psi = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2.
+    Nearly incompressible neo-Hookean [V §2.4.1] (Bonet & Wood):
+        S = mu J^(-2/3) (I - I1/3 C^-1) + bulk J (J - 1) C^-1,
+        psi = mu/2 (J^(-2/3) I1 - 3) + bulk/2 (J - 1)^2.
+    """
+    right_cauchy_green(F, dim, C)
+    if model == SAINT_VENANT_KIRCHHOFF:
+        tr = 0.0
+        for a in range(dim):
+            tr += 0.5 * (C[a, a] - 1.0)
+        ee = 0.0
+        for a in range(dim):
+            for b in range(dim):
+                e = 0.5 * (C[a, b] - (1.0 if a == b else 0.0))
+                ee += e * e
+                S[a, b] = 2.0 * mu * e + (lam * tr if a == b else 0.0)
+        first_piola(F, S, dim, P)
+        return 0.5 * lam * tr * tr + mu * ee
+    J = det(F, dim)
+    if not J > 0.0:
+        return math.nan
+    inverse(C, dim, Cinv)
+    i1 = float(3 - dim)
+    for a in range(dim):
+        i1 += C[a, a]
+    if model == NEO_HOOKEAN:
+        lnj = math.log(J)
+        for a in range(dim):
+            for b in range(dim):
+                S[a, b] = (mu * (1.0 if a == b else 0.0)) + (lam * lnj - mu) * Cinv[a, b]
+        first_piola(F, S, dim, P)
+        return 0.5 * mu * (i1 - 3.0) - mu * lnj + 0.5 * lam * lnj * lnj
+    jm23 = J ** (-2.0 / 3.0)
+    vol = bulk * J * (J - 1.0)
+    for a in range(dim):
+        for b in range(dim):
+            S[a, b] = mu * jm23 * ((1.0 if a == b else 0.0) - i1 / 3.0 * Cinv[a, b]) + vol * Cinv[a, b]
+    first_piola(F, S, dim, P)
+    return 0.5 * mu * (jm23 * i1 - 3.0) + 0.5 * bulk * (J - 1.0) ** 2

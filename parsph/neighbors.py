@@ -1,0 +1,56 @@
+"""Neighbour pairs in a configuration, as CSR rows sorted by the neighbours' global ids.
+
+Particles i and j are neighbours when |X_j - X_i| < (h_i + h_j) / 2: the pair's kernel
+support is the mean of the two particles' supports, so the relation and every pair
+quantity are symmetric in i and j. Rows are sorted by global id so that every sum over a
+row runs in an order that does not depend on how particles are numbered on a rank.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+@dataclass
+class Pairs:
+    """CSR neighbour lists for rows 0..len(ptr)-2; `idx` are local particle indices."""
+
+    ptr: np.ndarray  # int64 (rows + 1,)
+    idx: np.ndarray  # int64 (pairs,)
+
+    @property
+    def rows(self) -> int:
+        return len(self.ptr) - 1
+
+    def counts(self) -> np.ndarray:
+        return np.diff(self.ptr)
+
+    def row_of_pair(self) -> np.ndarray:
+        return np.repeat(np.arange(self.rows, dtype=np.int64), self.counts())
+
+
+def find_pairs(positions: np.ndarray, support: np.ndarray, gid: np.ndarray, rows: int) -> Pairs:
+    """Neighbours of particles 0..rows-1 among all given particles.
+
+    positions (n, d), support h (n,), gid (n,) int64. A particle is not its own neighbour.
+    """
+    n = len(positions)
+    if n == 0 or rows == 0:
+        return Pairs(np.zeros(rows + 1, np.int64), np.zeros(0, np.int64))
+    tree = cKDTree(positions)
+    pairs = tree.query_pairs(r=float(support.max()), output_type="ndarray").astype(np.int64)
+    i, j = pairs[:, 0], pairs[:, 1]
+    dist = np.linalg.norm(positions[j] - positions[i], axis=1)
+    keep = dist < 0.5 * (support[i] + support[j])
+    i, j = i[keep], j[keep]
+    i, j = np.concatenate([i, j]), np.concatenate([j, i])
+    mine = i < rows
+    i, j = i[mine], j[mine]
+    order = np.lexsort((gid[j], i))
+    i, j = i[order], j[order]
+    ptr = np.zeros(rows + 1, np.int64)
+    np.cumsum(np.bincount(i, minlength=rows), out=ptr[1:])
+    return Pairs(ptr, j)

@@ -1,0 +1,1 @@
+"""MPI runtime: communicator, collective error handling, domain decomposition, halo exchange."""

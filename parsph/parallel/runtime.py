@@ -1,0 +1,85 @@
+"""The MPI communicator and how ranks fail together.
+
+Rule: an error that every rank detects the same way (a scene error) is printed once by rank
+0 and every rank exits with the error's code. An error that only some ranks see is either
+caught inside a `collective()` block, where the ranks agree on it and all raise it, or it
+ends the whole job at once through `MPI.Abort`, so no rank is left waiting in a collective.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+
+from mpi4py import MPI
+
+from parsph.errors import InputError, ParsphError
+
+COMM = MPI.COMM_WORLD
+
+
+def rank() -> int:
+    return COMM.rank
+
+
+def size() -> int:
+    return COMM.size
+
+
+def say(*args, **kwargs) -> None:
+    """print() on rank 0 only."""
+    if COMM.rank == 0:
+        print(*args, **kwargs, flush=True)
+
+
+def warn(message: str) -> None:
+    if COMM.rank == 0:
+        print(f"parsph: warning: {message}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def collective(comm=COMM):
+    """Run a block on every rank; if it raises on any rank, raise the same error on all ranks.
+
+    The lowest failing rank's message is sent to everyone; InputError stays InputError.
+    """
+    failure = None
+    try:
+        yield
+    except ParsphError as exc:
+        failure = (type(exc).__name__, str(exc))
+    except Exception as exc:  # noqa: BLE001 - any failure must reach the other ranks
+        failure = ("ParsphError", f"{type(exc).__name__}: {exc}")
+    failures = comm.allgather(failure)
+    for r, item in enumerate(failures):
+        if item is not None:
+            kind, message = item
+            prefix = "" if comm.size == 1 or kind == "InputError" else f"[rank {r}] "
+            error = (InputError if kind == "InputError" else ParsphError)(prefix + message)
+            error.agreed = True
+            raise error
+
+
+def fail_all(exc: BaseException) -> int:
+    """Report an exception and end the job; returns the exit code when the job survives.
+
+    An error all ranks agreed on (raised by `collective`, or any error on a single rank) is
+    reported once by rank 0 and the caller exits with its code. Anything else may be
+    unique to this rank: it prints its message (with a traceback if unexpected) and
+    aborts every rank, so no rank hangs.
+    """
+    if isinstance(exc, ParsphError) and (getattr(exc, "agreed", False) or COMM.size == 1):
+        if COMM.rank == 0:
+            print(f"parsph: error: {exc}", file=sys.stderr, flush=True)
+        return exc.exit_code
+    if isinstance(exc, ParsphError):
+        print(f"parsph: error on rank {COMM.rank}: {exc}", file=sys.stderr, flush=True)
+        COMM.Abort(exc.exit_code)
+    import traceback
+
+    print(f"parsph: error on rank {COMM.rank}: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
+    traceback.print_exception(exc, file=sys.stderr)
+    sys.stderr.flush()
+    if COMM.size > 1:
+        COMM.Abort(1)
+    return 1

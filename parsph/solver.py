@@ -1,0 +1,261 @@
+"""`Simulation`: the particle state of one rank and the explicit time step.
+
+A step is velocity-Verlet (kick-drift-kick leap-frog):
+    v += dt/2 a;  constrained v;  u += dt v;  constrained u;  t += dt
+    halo(u) -> kinematics + stress -> halo(V P, F) -> forces -> a = f/m + b
+    v += dt/2 a;  constrained v
+Local arrays hold the rank's owned particles first, then its ghosts. Only the stages a
+scene uses are compiled and run (formulations.tlsph).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from parsph import config
+from parsph.bc import BoundaryConditions, apply_initial_conditions
+from parsph.build import Body
+from parsph.diagnostics import global_diagnostics, probe_values
+from parsph.errors import ParsphError
+from parsph.formulations import tlsph
+from parsph.kernels.correction import reference_pairs
+from parsph.materials.elastic import MODEL_IDS
+from parsph.neighbors import find_pairs
+from parsph.parallel.decomposition import Decomposition
+from parsph.parallel.runtime import collective
+
+
+class Simulation:
+    """Total-Lagrangian SPH state and stepping for the particles this rank owns."""
+
+    def __init__(self, scene: dict, body: Body, comm):
+        self.scene = scene
+        self.comm = comm
+        self.dim = dim = scene["scene"]["dimension"]
+        self.constants = config.material_constants(scene["material"])
+        self.model = MODEL_IDS[scene["material"]["model"]]
+        form = scene["formulation"]
+        self.alpha = form["hourglass"]
+        self.hourglass = self.alpha > 0.0
+        self.pair_form = form["force_form"] == "pair"
+        self._kinematics_stress, self._forces = tlsph.compile_stages(
+            dim, self.model, self.pair_form, self.hourglass)
+
+        with collective(comm):
+            self.decomp = Decomposition(body, comm)
+            local = self.decomp.local_gid
+            self.gid = local
+            self.n_owned = self.decomp.n_owned
+            self.X = np.ascontiguousarray(body.X[local])
+            self.mass = body.mass[local]
+            self.volume = body.volume[local]
+            self.groups = body.groups
+            # rows for owned particles and for ghosts whose neighbourhood is complete
+            rows = self.decomp.n_rows
+            support = body.support[local]
+            self.pairs = find_pairs(self.X, support, local, rows)
+            self.ref = reference_pairs(self.X, body.measure[local], support, local, self.pairs,
+                                       scene["kernel"]["type"])
+        self._trim_to_owned()
+        n_local = len(self.gid)
+        self.u = np.zeros((n_local, dim))
+        self.v = np.zeros((n_local, dim))
+        self.F = np.zeros((n_local, dim, dim))
+        self.VP = np.zeros((n_local, dim, dim))
+        self.J = np.ones(n_local)
+        self.psi = np.zeros(n_local)
+        self.f_int = np.zeros((self.n_owned, dim))
+        self.f_hg = np.zeros((self.n_owned, dim) if self.hourglass else (0, dim))
+        self.youngs = np.full(n_local, self.constants.youngs)
+        body_acc = scene["loads"]["body_acceleration"]
+        self.body_acc = None if body_acc is None else np.asarray(body_acc)
+        self.damping = scene["time"]["damping"]
+
+        own = self.gid[: self.n_owned]
+        apply_initial_conditions(scene["initial"], self.groups, own, self.X[: self.n_owned],
+                                 self.u[: self.n_owned], self.v[: self.n_owned])
+        self.bcs = BoundaryConditions(scene["bc"], self.groups, own, dim)
+        self.free = ~self.bcs.mask
+        self.t = 0.0
+        self.step_count = 0
+        self.strain_energy_local = 0.0
+        self.hourglass_energy_local = 0.0
+        self.external_work_local = 0.0
+        self._stable_dt = self._stable_time_step()
+        self.bcs.set_displacement(self.u[: self.n_owned], 0.0)
+        self.bcs.set_velocity(self.v[: self.n_owned], 0.0)
+        self.compute_forces()
+
+    # ----------------------------------------------------------------- set-up helpers
+    def _trim_to_owned(self) -> None:
+        """Keep per-pair data for owned rows only (ghost rows served to build g_ji) and
+        drop the layer-2 ghosts, which only served to build the ghosts' rows."""
+        self.decomp.trim()
+        keep = len(self.decomp.local_gid)
+        self.gid, self.X = self.gid[:keep], self.X[:keep]
+        self.mass, self.volume = self.mass[:keep], self.volume[:keep]
+        n = self.n_owned
+        ptr = self.pairs.ptr[: n + 1]
+        end = ptr[-1]
+        ref = self.ref
+        self.ptr = ptr
+        self.idx = self.pairs.idx[:end].astype(np.int64)
+        self.g = np.ascontiguousarray(ref.g[:end])
+        self.g_rev = np.ascontiguousarray(ref.g_rev[:end])
+        if np.isnan(self.g_rev).any():
+            raise ParsphError("internal: a neighbour of an owned particle has no reference row")
+        self.g_sum = np.ascontiguousarray(ref.g_sum[:n])
+        self.dx = np.ascontiguousarray(ref.dx[:end])
+        self.hgc = np.zeros(0)
+        if self.hourglass:
+            self.hgc = tlsph.hourglass_coefficients(
+                self.pairs.row_of_pair()[:end], self.idx, self.dx, ref.w[:end], self.volume,
+                self.volume / self._out_of_plane(), self.alpha)
+        self.min_spacing = np.sqrt(np.minimum.reduceat(
+            np.einsum("pa,pa->p", self.dx, self.dx), ptr[:-1])) if end else np.full(n, np.inf)
+        del self.ref, self.pairs
+
+    def _out_of_plane(self) -> float:
+        geo = self.scene["geometry"]
+        return {1: geo["area"], 2: geo["thickness"], 3: 1.0}[self.dim]
+
+    def _stable_time_step(self) -> float:
+        """CFL step: dt_i = cfl * 2 / sqrt(omega_el^2 + omega_hg^2), omega_el = 2 c / l_i.
+
+        l_i is the nearest reference neighbour distance scaled by min(1, J_i)^(1/d); the
+        hourglass springs add omega_hg^2 = 2 sum_j c_ij (E_i + E_j) / (m_i |X_ij|^0) (a
+        Gershgorin bound on their stiffness).
+        """
+        time = self.scene["time"]
+        if time["dt"] > 0:
+            return time["dt"]
+        n = self.n_owned
+        c = self.constants.wave_speed
+        if not hasattr(self, "_omega_hg2"):
+            self._omega_hg2 = np.zeros(n)
+            if self.hourglass and len(self.idx):
+                rows = np.repeat(np.arange(n), np.diff(self.ptr))
+                k = self.hgc * (self.youngs[rows] + self.youngs[self.idx])
+                self._omega_hg2 = 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
+        scale = np.minimum(1.0, self.J[:n]) ** (1.0 / self.dim)
+        omega_el = 2.0 * c / (self.min_spacing * scale)
+        local = np.min(2.0 / np.sqrt(omega_el ** 2 + self._omega_hg2)) if n else np.inf
+        from mpi4py import MPI
+
+        return time["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
+
+    # ----------------------------------------------------------------- the step
+    def compute_forces(self) -> None:
+        """Stages of the force evaluation at the current u; sets self.acc (owned)."""
+        n = self.n_owned
+        lam, mu, bulk = self.constants.lam, self.constants.mu, self.constants.bulk
+        self.decomp.refresh(self.u)
+        energy, bad = self._kinematics_stress(n, self.ptr, self.idx, self.g,
+                                              self.u, self.volume, lam, mu, bulk, self.F, self.VP,
+                                              self.J, self.psi)
+        if bad >= 0:
+            x = self.X[bad] + self.u[bad]
+            where = ", ".join(f"{c:.6g}" for c in x)
+            raise ParsphError(
+                f"particle {int(self.gid[bad])} at ({where}) is inverted or its stress is not finite "
+                f"(J = {self.J[bad]:.4g}) at step {self.step_count}, t = {self.t:.6g}; the run is "
+                "unstable: reduce time.cfl, raise formulation.hourglass or refine the particles")
+        self.strain_energy_local = energy
+        self.decomp.refresh(self.VP, *( (self.F,) if self.hourglass else ()))
+        self._forces(n, self.ptr, self.idx, self.g,
+                     self.g_rev, self.g_sum, self.dx, self.hgc, self.u, self.F, self.VP, self.youngs,
+                     self.f_int, self.f_hg)
+        force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
+        if self.body_acc is not None:
+            force += self.mass[:n, None] * self.body_acc
+        self.force = force
+        self.acc = force / self.mass[:n, None]
+
+    def external_force(self) -> np.ndarray:
+        """Body force plus constraint reactions on the owned particles."""
+        n = self.n_owned
+        ext = np.zeros((n, self.dim))
+        if self.body_acc is not None:
+            ext += self.mass[:n, None] * self.body_acc
+        ext[self.bcs.mask] -= self.force[self.bcs.mask]
+        return ext
+
+    def reaction(self) -> np.ndarray:
+        """Force the constraints exert on each owned particle (zero where unconstrained)."""
+        r = np.zeros((self.n_owned, self.dim))
+        r[self.bcs.mask] = -self.force[self.bcs.mask]
+        return r
+
+    def _kick(self, dt: float) -> None:
+        n = self.n_owned
+        v = self.v[:n]
+        if self.damping > 0:
+            v *= math.exp(-self.damping * dt)
+        v += dt * self.acc
+
+    def step(self) -> float:
+        """Advance one time step; returns the step size used."""
+        n = self.n_owned
+        dt = self._stable_dt
+        u_old = self.u[:n].copy()
+        f_hg_old = self.f_hg.copy()
+        f_ext_old = self.external_force()
+        self._kick(0.5 * dt)
+        self.bcs.set_velocity(self.v[:n], self.t + 0.5 * dt)
+        self.u[:n] += dt * self.v[:n]
+        self.t += dt
+        self.bcs.set_displacement(self.u[:n], self.t)
+        self.compute_forces()
+        self._kick(0.5 * dt)
+        self.bcs.set_velocity(self.v[:n], self.t)
+        du = self.u[:n] - u_old
+        if self.hourglass:
+            self.hourglass_energy_local -= 0.5 * np.sum((f_hg_old + self.f_hg) * du)
+        self.external_work_local += 0.5 * np.sum((f_ext_old + self.external_force()) * du)
+        self.step_count += 1
+        if self.scene["time"]["dt"] == 0 and self.model != 0:
+            self._stable_dt = self._stable_time_step()
+        return dt
+
+    # ----------------------------------------------------------------- read-outs
+    def group_index(self, name: str) -> np.ndarray:
+        return np.flatnonzero(self.groups[name][self.gid[: self.n_owned]])
+
+    def quantity(self, name: str, sel: np.ndarray) -> np.ndarray:
+        """A particle quantity on the owned particles `sel` (probes and snapshots)."""
+        if name == "displacement":
+            return self.u[sel]
+        if name == "velocity":
+            return self.v[sel]
+        if name == "position":
+            return self.X[sel] + self.u[sel]
+        if name == "reaction":
+            return self.reaction()[sel]
+        if name == "force":
+            return self.force[sel]
+        if name == "J":
+            return self.J[sel]
+        if name == "von_mises":
+            return self.von_mises(sel)
+        raise ValueError(name)
+
+    def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
+        """sigma = J^-1 P F^T (in-plane block in 2D)."""
+        P = self.VP[sel] / self.volume[sel, None, None]
+        return np.einsum("nab,ncb->nac", P, self.F[sel]) / self.J[sel, None, None]
+
+    def von_mises(self, sel: np.ndarray) -> np.ndarray:
+        s = self.cauchy_stress(sel)
+        d = self.dim
+        full = np.zeros((len(sel), 3, 3))
+        full[:, :d, :d] = s
+        dev = full - np.trace(full, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
+        return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
+
+    def diagnostics(self) -> dict:
+        out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt}
+        out.update(global_diagnostics(self))
+        out.update(probe_values(self.scene["probes"], self.groups, self))
+        return out
