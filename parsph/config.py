@@ -59,7 +59,8 @@ def in_range(lo, hi, lo_open=False, hi_open=False):
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = ("saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible")
-PROBE_QUANTITIES = ("displacement", "velocity", "position", "reaction", "force", "J", "von_mises")
+PROBE_QUANTITIES = ("displacement", "velocity", "position", "reaction", "force", "J", "von_mises",
+                    "disorder")
 SNAPSHOT_FIELDS = PROBE_QUANTITIES + ("rank", "reference_position")
 
 
@@ -100,6 +101,8 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "type": Key("str", "tlsph", one_of("tlsph")),
         "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
         "hourglass": Key("float", 50.0, non_negative, "hourglass coefficient alpha [G eq. 31]"),
+        "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
+                              "paper: [G eq. 32]; variational: forces from the penalty energy"),
     },
     "time": {
         "end": Key("float", REQUIRED, positive, "end time [s]"),

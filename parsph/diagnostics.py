@@ -1,6 +1,7 @@
 """Global diagnostics and probes, reduced over ranks in a fixed order.
 
-Energies: kinetic, strain (sum V psi), hourglass (minus the work done by the hourglass
+Disorder: the mass-weighted RMS and the maximum of the hourglass error eta_i
+(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), hourglass (minus the work done by the hourglass
 forces), external work (body force and constraint reactions) and the balance
 total = kinetic + strain + hourglass - external, which is constant for an exact
 integration. Momenta: linear (vector) and angular (scalar in 2D, vector in 3D).
@@ -56,17 +57,23 @@ def global_diagnostics(state) -> dict:
     v = state.v[:n]
     x = state.X[:n] + state.u[:n]
     p = m * v
+    eta = state.disorder()
     local = np.concatenate([
+        [np.sum(m[:, 0] * eta * eta), np.sum(m)],
         [0.5 * np.sum(m * v * v), state.strain_energy_local, state.hourglass_energy_local,
          state.external_work_local],
         p.sum(axis=0), angular_momentum(x, p),
     ])
     total = _sum(state.comm, local)
+    disorder = np.sqrt(total[0] / total[1])
+    total = total[2:]
     kinetic, strain, hourglass, external = total[:4]
     dim = state.dim
     out = {
         "kinetic_energy": kinetic, "strain_energy": strain, "hourglass_energy": hourglass,
         "external_work": external, "total_energy": kinetic + strain + hourglass - external,
+        "disorder": disorder,
+        "disorder_max": state.comm.allreduce(eta.max() if len(eta) else 0.0, op=MPI.MAX),
     }
     for a, name in enumerate("xyz"[:dim]):
         out[f"momentum_{name}"] = total[4 + a]

@@ -19,7 +19,7 @@ from parsph.solver import Simulation
 
 RUN_FILES = ("history.h5", "snapshots.h5", "snapshots.xdmf", "scene.json")
 PROBE_UNITS = {"displacement": "m", "velocity": "m/s", "position": "m", "reaction": "N", "force": "N",
-               "J": "1", "von_mises": "Pa"}
+               "J": "1", "von_mises": "Pa", "disorder": "1"}
 
 
 def prepare_output(out_dir: str, overwrite: bool) -> None:

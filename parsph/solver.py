@@ -39,9 +39,10 @@ class Simulation:
         form = scene["formulation"]
         self.alpha = form["hourglass"]
         self.hourglass = self.alpha > 0.0
+        self.hourglass_form = tlsph.HOURGLASS_FORMS[form["hourglass_form"]] if self.hourglass else 0
         self.pair_form = form["force_form"] == "pair"
         self._kinematics_stress, self._forces = tlsph.compile_stages(
-            dim, self.model, self.pair_form, self.hourglass)
+            dim, self.model, self.pair_form, self.hourglass_form)
 
         with collective(comm):
             self.decomp = Decomposition(body, comm)
@@ -108,6 +109,7 @@ class Simulation:
             raise ParsphError("internal: a neighbour of an owned particle has no reference row")
         self.g_sum = np.ascontiguousarray(ref.g_sum[:n])
         self.dx = np.ascontiguousarray(ref.dx[:end])
+        self.w = np.ascontiguousarray(ref.w[:end])
         self.hgc = np.zeros(0)
         if self.hourglass:
             self.hgc = tlsph.hourglass_coefficients(
@@ -152,9 +154,9 @@ class Simulation:
         n = self.n_owned
         lam, mu, bulk = self.constants.lam, self.constants.mu, self.constants.bulk
         self.decomp.refresh(self.u)
-        energy, bad = self._kinematics_stress(n, self.ptr, self.idx, self.g,
-                                              self.u, self.volume, lam, mu, bulk, self.F, self.VP,
-                                              self.J, self.psi)
+        energy, hg_energy, bad = self._kinematics_stress(
+            n, self.ptr, self.idx, self.g, self.dx, self.hgc, self.u, self.volume, self.youngs,
+            lam, mu, bulk, self.F, self.VP, self.J, self.psi)
         if bad >= 0:
             x = self.X[bad] + self.u[bad]
             where = ", ".join(f"{c:.6g}" for c in x)
@@ -163,6 +165,8 @@ class Simulation:
                 f"(J = {self.J[bad]:.4g}) at step {self.step_count}, t = {self.t:.6g}; the run is "
                 "unstable: reduce time.cfl, raise formulation.hourglass or refine the particles")
         self.strain_energy_local = energy
+        if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
+            self.hourglass_energy_local = hg_energy
         self.decomp.refresh(self.VP, *( (self.F,) if self.hourglass else ()))
         self._forces(n, self.ptr, self.idx, self.g,
                      self.g_rev, self.g_sum, self.dx, self.hgc, self.u, self.F, self.VP, self.youngs,
@@ -211,7 +215,8 @@ class Simulation:
         self._kick(0.5 * dt)
         self.bcs.set_velocity(self.v[:n], self.t)
         du = self.u[:n] - u_old
-        if self.hourglass:
+        if self.hourglass_form == tlsph.HOURGLASS_PAPER:
+            # not a potential force: its energy is the work it has absorbed
             self.hourglass_energy_local -= 0.5 * np.sum((f_hg_old + self.f_hg) * du)
         self.external_work_local += 0.5 * np.sum((f_ext_old + self.external_force()) * du)
         self.step_count += 1
@@ -239,7 +244,15 @@ class Simulation:
             return self.J[sel]
         if name == "von_mises":
             return self.von_mises(sel)
+        if name == "disorder":
+            return self.disorder()[sel]
         raise ValueError(name)
+
+    def disorder(self) -> np.ndarray:
+        """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
+        out = np.empty(self.n_owned)
+        tlsph.hourglass_error(self.n_owned, self.ptr, self.idx, self.dx, self.w, self.u, self.F, out)
+        return out
 
     def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
         """sigma = J^-1 P F^T (in-plane block in 2D)."""

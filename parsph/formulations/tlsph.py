@@ -10,21 +10,29 @@ Stage 2, `forces`: the internal force in one of two forms,
     virtual work [V eq. 11]: f_i = -sum_{j in S_i + {i}} V_j P_j G_i(X_j),
         with G_i(X_j) = g_ji and the self coefficient G_i(X_i) = -sum_k g_ik,
 which agree in exact arithmetic when F uses the symmetrised corrected gradient (they
-differ by summation order only); both conserve linear momentum. Optionally the hourglass
-force [G eq. 25-32], per pair, antisymmetric and along x_ij:
-    delta^i_ij = (F_i X_ij - x_ij) . x_ij / |x_ij|
-    f_i^HG = -sum_j c_ij (E_i delta^i_ij + E_j delta^j_ji) x_ij / |x_ij|,
-    c_ij = alpha/2 V_i V_j W_ij / |X_ij|^2.
+differ by summation order only); both conserve linear momentum.
+
+Hourglass control penalises the error e^i_ij = F_i X_ij - x_ij, the part of the neighbour
+separation that F does not explain [G eq. 25-26], with c_ij = alpha/2 V_i V_j W_ij / |X_ij|^2:
+  "paper" [G eq. 27-32]: per pair, antisymmetric and along x_ij,
+      delta^i_ij = e^i_ij . x_ij / |x_ij|,
+      f_i^HG = -sum_j c_ij (E_i delta^i_ij + E_j delta^j_ji) x_ij / |x_ij|.
+    It is not the gradient of a potential, and it can feed energy into a long undamped run.
+  "variational": the forces are minus the gradient of the penalty energy
+      Phi = sum_i sum_j c_ij E_i |e^i_ij|^2 / 2,
+    including its dependence on F_i: a direct pair part -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
+    and the hourglass stress A_i = dPhi/dF_i = sum_j c_ij E_i e^i_ij (x) X_ij, which enters
+    the internal force exactly like V_i P_i. Energy (with Phi) and linear and angular
+    momentum are conserved.
 `compile_stages` makes both stages for one scene's switches (dimension, material, force
-form, hourglass on/off), captured as compile-time constants: a scene's machine code holds
+form, hourglass form), captured as compile-time constants: a scene's machine code holds
 only the terms it uses. Compiled code is cached on disk per combination.
 """
 
 from __future__ import annotations
 
-import math
-
 import functools
+import math
 
 import numpy as np
 from numba import njit
@@ -32,8 +40,12 @@ from numba import njit
 from parsph.materials.elastic import det, stress
 
 
+HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
+HOURGLASS_FORMS = {"paper": HOURGLASS_PAPER, "variational": HOURGLASS_VARIATIONAL}
+
+
 @functools.lru_cache(maxsize=None)
-def compile_stages(dim: int, model: int, pair_form: bool, hourglass: bool):
+def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int):
     """(kinematics_stress, forces) specialised for one scene's switches.
 
     The switches are closure constants; the stage bodies are inlined, so branches on them
@@ -41,9 +53,11 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: bool):
     """
 
     @njit(cache=True)
-    def kinematics_stress(n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, psi):
-        """Stage 1 for particles 0..n-1; returns (strain energy, first inverted particle or -1)."""
-        return _kinematics(dim, model, n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, psi)
+    def kinematics_stress(n, ptr, idx, g, dx, hgc, u, volume, youngs, lam, mu, bulk, F, VP, J, psi):
+        """Stage 1 for particles 0..n-1; returns (strain energy, hourglass potential,
+        first inverted particle or -1)."""
+        return _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, youngs, lam,
+                           mu, bulk, F, VP, J, psi)
 
     @njit(cache=True)
     def forces(n, ptr, idx, g, g_rev, g_sum, dx, hgc, u, F, VP, youngs, f_int, f_hg):
@@ -55,12 +69,15 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: bool):
 
 
 @njit(cache=True, inline="always")
-def _kinematics(dim, model, n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, psi):
+def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, youngs, lam, mu, bulk,
+                F, VP, J, psi):
     P = np.empty((dim, dim))
     S = np.empty((dim, dim))
     C = np.empty((dim, dim))
     Cinv = np.empty((dim, dim))
+    err = np.empty(dim)
     energy = 0.0
+    hg_energy = 0.0
     first_bad = -1
     for i in range(n):
         for a in range(dim):
@@ -81,7 +98,23 @@ def _kinematics(dim, model, n, ptr, idx, g, u, volume, lam, mu, bulk, F, VP, J, 
         for a in range(dim):
             for b in range(dim):
                 VP[i, a, b] = volume[i] * P[a, b]
-    return energy, first_bad
+        if hourglass == HOURGLASS_VARIATIONAL:
+            # hourglass "stress" A_i = dPhi/dF_i = sum_j c_ij E_i e_ij (x) X_ij, added to V_i P_i
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                k = hgc[p] * youngs[i]
+                e2 = 0.0
+                for a in range(dim):
+                    fx = 0.0
+                    for b in range(dim):
+                        fx += F[i, a, b] * dx[p, b]
+                    err[a] = fx - dx[p, a] - u[j, a] + u[i, a]
+                    e2 += err[a] * err[a]
+                hg_energy += 0.5 * k * e2
+                for a in range(dim):
+                    for b in range(dim):
+                        VP[i, a, b] += k * err[a] * dx[p, b]
+    return energy, hg_energy, first_bad
 
 
 @njit(cache=True, inline="always")
@@ -91,7 +124,7 @@ def _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, u,
     for i in range(n):
         for a in range(dim):
             f_int[i, a] = 0.0
-            if hourglass:
+            if hourglass != HOURGLASS_OFF:
                 f_hg[i, a] = 0.0
         if not pair_form:
             for a in range(dim):
@@ -108,12 +141,12 @@ def _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, u,
                     if pair_form:
                         s += VP[i, a, b] * g[p, b]
                 f_int[i, a] += s
-            if hourglass:
+            if hourglass == HOURGLASS_PAPER:
+                # [G eq. 27, 32]: errors projected on the current separation, central force
                 r2 = 0.0
                 for a in range(dim):
                     xij[a] = dx[p, a] + u[j, a] - u[i, a]
                     r2 += xij[a] * xij[a]
-                r = math.sqrt(r2)
                 di = 0.0
                 dj = 0.0
                 for a in range(dim):
@@ -127,6 +160,16 @@ def _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, u,
                 c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / r2
                 for a in range(dim):
                     f_hg[i, a] += c * xij[a]
+            elif hourglass == HOURGLASS_VARIATIONAL:
+                # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
+                for a in range(dim):
+                    xa = dx[p, a] + u[j, a] - u[i, a]
+                    fi = 0.0
+                    fj = 0.0
+                    for b in range(dim):
+                        fi += F[i, a, b] * dx[p, b]
+                        fj += F[j, a, b] * dx[p, b]
+                    f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
 
 
 def hourglass_coefficients(rows, idx, dx, w, volume, measure, alpha: float) -> np.ndarray:
@@ -136,3 +179,24 @@ def hourglass_coefficients(rows, idx, dx, w, volume, measure, alpha: float) -> n
     d-dimensional measure (area in 2D, length in 1D) so that the force is in newtons.
     """
     return 0.5 * alpha * volume[rows] * measure[idx] * w / np.einsum("pa,pa->p", dx, dx)
+
+
+@njit(cache=True)
+def hourglass_error(n, ptr, idx, dx, w, u, F, out):
+    """Disorder measure per particle: the part of the neighbour separations that F does not
+    explain, relative to the separations themselves [G eq. 26],
+        eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ).
+    Zero for any affine motion; grows with hourglass modes and particle disorder."""
+    dim = dx.shape[1]
+    for i in range(n):
+        num = 0.0
+        den = 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            for a in range(dim):
+                e = u[j, a] - u[i, a]
+                for b in range(dim):
+                    e -= (F[i, a, b] - (1.0 if a == b else 0.0)) * dx[p, b]
+                num += w[p] * e * e
+                den += w[p] * dx[p, a] * dx[p, a]
+        out[i] = math.sqrt(num / den) if den > 0 else 0.0
