@@ -8,8 +8,10 @@ an `InputError` whose message names the key (`material.density`, `bc[1].group`, 
 
 from __future__ import annotations
 
+import ast
 import copy
 import difflib
+import operator
 import json
 import math
 import tomllib
@@ -175,7 +177,7 @@ PROBE_KEYS = {
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
-TOP_LEVEL = tuple(SECTIONS) + ("groups", "bc", "initial", "probes")
+TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "initial", "probes")
 
 
 def _suggest(name: str, known) -> str:
@@ -380,10 +382,67 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         scene["probes"].append(probe)
 
 
+_OPERATORS = {
+    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
+    ast.Pow: operator.pow, ast.USub: operator.neg, ast.UAdd: operator.pos,
+}
+
+
+def _evaluate(path: str, text: str, parameters: dict) -> float:
+    """Value of an arithmetic expression over the scene's parameters (+ - * / ** and brackets)."""
+
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+            return node.value
+        if isinstance(node, ast.Name):
+            if node.id not in parameters:
+                raise InputError(f"{path}: unknown parameter '{node.id}' in '{text}'{_suggest(node.id, parameters)}")
+            return parameters[node.id]
+        if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
+            return _OPERATORS[type(node.op)](ev(node.left), ev(node.right))
+        if isinstance(node, ast.UnaryOp) and type(node.op) in _OPERATORS:
+            return _OPERATORS[type(node.op)](ev(node.operand))
+        raise InputError(f"{path}: '{text}' is not an arithmetic expression of numbers and parameters")
+
+    try:
+        value = ev(ast.parse(text, mode="eval"))
+    except SyntaxError:
+        raise InputError(f"{path}: '{text}' is not an arithmetic expression") from None
+    except (ZeroDivisionError, OverflowError) as exc:
+        raise InputError(f"{path}: '{text}' cannot be evaluated ({exc})") from None
+    return value
+
+
+def substitute_parameters(raw: dict) -> dict:
+    """Replace every string value "= EXPR" by its value over the table [parameters]."""
+    parameters = raw.get("parameters", {})
+    if not isinstance(parameters, dict):
+        raise InputError("parameters must be a table of named numbers")
+    for name, value in parameters.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"parameters.{name} must be a number, got {value!r}")
+
+    def walk(node, path):
+        if isinstance(node, str) and node.lstrip().startswith("="):
+            return _evaluate(path, node.lstrip()[1:].strip(), parameters)
+        if isinstance(node, dict):
+            return {k: walk(v, f"{path}.{k}" if path else k) for k, v in node.items()}
+        if isinstance(node, list):
+            return [walk(v, f"{path}[{i}]") for i, v in enumerate(node)]
+        return node
+
+    return walk(raw, "")
+
+
 def validate(raw: dict) -> dict:
-    """Check a raw scene dict and return the resolved scene (defaults filled in)."""
+    """Check a raw scene dict and return the resolved scene (defaults filled in).
+
+    String values of the form "= EXPR" are first evaluated over [parameters]."""
     if not isinstance(raw, dict):
         raise InputError("a scene must be a TOML table")
+    raw = substitute_parameters(raw)
     for name in raw:
         if name not in TOP_LEVEL:
             raise InputError(f"unknown key '{name}'{_suggest(name, TOP_LEVEL)}")
@@ -401,6 +460,7 @@ def validate(raw: dict) -> dict:
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
     scene["groups"] = _validate_groups(raw.get("groups"), dim)
     _validate_lists(scene, raw, dim)
+    scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 
 
