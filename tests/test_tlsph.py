@@ -153,3 +153,26 @@ center = [0.5, 0.5]
     e = rows["total_energy"]
     assert rows["hourglass_energy"].max() > 1e-3 * e[0]  # the penalty is active
     assert np.abs(e - e[0]).max() < 2e-3 * e[0]
+
+
+def test_singular_correction_matrix_names_the_particle():
+    from parsph.errors import InputError
+
+    # a 1-particle-wide row: every L is singular in y (all neighbours collinear)
+    text = block_2d().replace("upper = [1.0, 0.6]", "upper = [1.0, 0.1]")
+    with pytest.raises(InputError, match=r"correction matrix L of particle \d+ at \(.*\) is singular"):
+        simulation(text)
+
+
+def test_body_force_accelerates_a_free_body_uniformly_and_does_work():
+    sim = simulation(block_2d(hourglass=50.0) + """
+[loads]
+body_acceleration = [0.0, -9.81]
+""")
+    rows = run_until(sim, 0.05)
+    assert np.abs(sim.acc - [0.0, -9.81]).max() < 1e-9
+    t = sim.t
+    assert np.abs(sim.u[:, 1] + 0.5 * 9.81 * t * t).max() < 1e-9
+    e = rows["total_energy"]
+    assert rows["external_work"][-1] == pytest.approx(rows["kinetic_energy"][-1], rel=1e-9)
+    assert np.abs(e - e[0]).max() < 1e-9 * rows["kinetic_energy"][-1]
