@@ -38,10 +38,11 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("scene")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     sub.add_parser("info", help="print the environment: versions, ranks, parallel HDF5, threads")
-    pl = sub.add_parser("plot", help="plot history series to PNG")
-    pl.add_argument("history", help="OUT/history.h5")
-    pl.add_argument("names", nargs="*", help="series to plot (default: energies)")
-    pl.add_argument("--output", "-o", help="PNG file (default next to the history file)")
+    pl = sub.add_parser("plot", help="plot history series or snapshot fields to PNG")
+    pl.add_argument("file", help="OUT/history.h5 or OUT/snapshots.h5")
+    pl.add_argument("names", nargs="*", help="history series (default: energies) or one snapshot field (default: J)")
+    pl.add_argument("--frames", type=int, default=4, help="snapshots to draw side by side")
+    pl.add_argument("--output", "-o", help="PNG file (default next to the input file)")
     return p
 
 
@@ -77,37 +78,6 @@ def info() -> None:
         print(f"{k:<{width}}  {v}")
 
 
-def plot(history: str, names: list, output: str | None) -> None:
-    from parsph.errors import InputError
-    from parsph.io.history import read_history
-
-    try:
-        import matplotlib
-    except ImportError:
-        raise InputError("parsph plot needs matplotlib: pip install matplotlib") from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    if not os.path.exists(history):
-        raise InputError(f"history file not found: {history}")
-    data = read_history(history)
-    names = names or [n for n in ("kinetic_energy", "strain_energy", "hourglass_energy", "total_energy")
-                      if n in data]
-    missing = [n for n in names if n not in data]
-    if missing:
-        raise InputError(f"no series {missing} in {history}; it has: {', '.join(sorted(data))}")
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for n in names:
-        ax.plot(data["time"], data[n], label=n)
-    ax.set_xlabel("time [s]")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    output = output or os.path.splitext(history)[0] + "_" + "_".join(names)[:80] + ".png"
-    fig.tight_layout()
-    fig.savefig(output, dpi=120)
-    print(output)
-
-
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from parsph.parallel.runtime import fail_all, say
@@ -129,7 +99,15 @@ def main(argv=None) -> int:
         elif args.command == "info":
             info()
         elif args.command == "plot":
-            plot(args.history, args.names, args.output)
+            from parsph.errors import InputError
+            from parsph.io import plots
+
+            if not os.path.exists(args.file):
+                raise InputError(f"file not found: {args.file}")
+            if os.path.basename(args.file).startswith("snapshots"):
+                print(plots.plot_snapshots(args.file, (args.names or ["J"])[0], args.frames, args.output))
+            else:
+                print(plots.plot_history(args.file, args.names, args.output))
     except KeyboardInterrupt:
         return 130
     except BaseException as exc:  # noqa: BLE001 - every failure ends all ranks

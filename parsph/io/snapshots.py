@@ -63,7 +63,7 @@ class SnapshotWriter:
         lines = ['<?xml version="1.0" ?>', '<Xdmf Version="3.0">', "<Domain>",
                  '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">']
         for t, group, n, shapes in self.entries:
-            lines.append(f'<Grid Name="{group}" GridType="Uniform"><Time Value="{t!r}"/>')
+            lines.append(f'<Grid Name="{group}" GridType="Uniform"><Time Value="{float(t)!r}"/>')
             lines.append(f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}"/>')
             lines.append(f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" Format="HDF" '
                          f'NumberType="Float" Precision="8">{base}:/{group}/position</DataItem></Geometry>')

@@ -1,0 +1,71 @@
+"""PNG plots of a run's output with matplotlib: history series, and particle snapshots."""
+
+from __future__ import annotations
+
+import os
+
+import h5py
+import numpy as np
+
+from parsph.errors import InputError
+from parsph.io.history import read_history
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError:
+        raise InputError("plotting needs matplotlib: pip install matplotlib") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_history(path: str, names: list, output: str | None) -> str:
+    """Series `names` (default: the energies) against time."""
+    plt = _pyplot()
+    data = read_history(path)
+    names = names or [n for n in ("kinetic_energy", "strain_energy", "hourglass_energy", "total_energy")
+                      if n in data]
+    missing = [n for n in names if n not in data]
+    if missing:
+        raise InputError(f"no series {missing} in {path}; it has: {', '.join(sorted(data))}")
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for n in names:
+        ax.plot(data["time"], data[n], label=n)
+    ax.set_xlabel("time [s]")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    output = output or os.path.splitext(path)[0] + "_" + "_".join(names)[:80] + ".png"
+    fig.tight_layout()
+    fig.savefig(output, dpi=120)
+    return output
+
+
+def plot_snapshots(path: str, field: str, count: int, output: str | None) -> str:
+    """Particle clouds coloured by `field` at `count` times spread over the run (2D: x-y;
+    3D: x-z projection)."""
+    plt = _pyplot()
+    with h5py.File(path, "r") as f:
+        steps = sorted(k for k in f if k.startswith("step_"))
+        if not steps:
+            raise InputError(f"{path} holds no snapshots")
+        pick = [steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, count).round().astype(int))]
+        if field not in f[pick[0]]:
+            raise InputError(f"no field '{field}' in {path}; it has: {', '.join(sorted(f[pick[0]]))}")
+        frames = [(f[s].attrs["time"], f[s]["position"][()], f[s][field][()]) for s in pick]
+    values = [np.linalg.norm(v, axis=1) if v.ndim == 2 else v for _, _, v in frames]
+    lo = min(v.min() for v in values)
+    hi = max(v.max() for v in values)
+    fig, axes = plt.subplots(1, len(frames), figsize=(3.2 * len(frames), 4), squeeze=False)
+    for ax, (t, x, _), v in zip(axes[0], frames, values):
+        vertical = 2 if np.ptp(x[:, 2]) > 0 else 1
+        sc = ax.scatter(x[:, 0], x[:, vertical], c=v, s=4, vmin=lo, vmax=hi, cmap="viridis")
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {t:.4g} s", fontsize=9)
+        ax.tick_params(labelsize=7)
+    fig.colorbar(sc, ax=axes[0].tolist(), label=field, shrink=0.8)
+    output = output or os.path.splitext(path)[0] + f"_{field}.png"
+    fig.savefig(output, dpi=110)
+    return output
