@@ -25,6 +25,11 @@ class Constraint:
     value: np.ndarray  # (d,)
     ramp: float
 
+    def __post_init__(self):
+        # flat (particle, component) pairs of the constrained entries
+        self.rows = np.repeat(self.index, len(self.components))
+        self.cols = np.tile(self.components, len(self.index))
+
     def velocity(self, t: float) -> np.ndarray:
         if self.kind == "fixed":
             return np.zeros_like(self.value)
@@ -58,17 +63,18 @@ class BoundaryConditions:
             comps = np.asarray(spec["components"], np.int64)
             self.items.append(Constraint(spec["type"], index, comps, np.asarray(spec["value"], float),
                                          spec["ramp"]))
-            self.mask[np.ix_(index, comps)] = True
+            item = self.items[-1]
+            self.mask[item.rows, item.cols] = True
 
     def set_velocity(self, v: np.ndarray, t: float) -> None:
         for c in self.items:
-            v[np.ix_(c.index, c.components)] = c.velocity(t)[c.components]
+            v[c.rows, c.cols] = c.velocity(t)[c.cols]
 
     def set_displacement(self, u: np.ndarray, t: float) -> None:
         for c in self.items:
             d = c.displacement(t)
             if d is not None:
-                u[np.ix_(c.index, c.components)] = d[c.components]
+                u[c.rows, c.cols] = d[c.cols]
 
 
 def apply_initial_conditions(specs: list, masks: dict, owned_gid, X, u, v) -> None:

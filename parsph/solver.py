@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from mpi4py import MPI
 
 from parsph import config
 from parsph.bc import BoundaryConditions, apply_initial_conditions
@@ -84,10 +85,11 @@ class Simulation:
         self.strain_energy_local = 0.0
         self.hourglass_energy_local = 0.0
         self.external_work_local = 0.0
-        self._stable_dt = self._stable_time_step()
+        self._omega_hg2 = self._hourglass_frequencies()
         self.bcs.set_displacement(self.u[: self.n_owned], 0.0)
         self.bcs.set_velocity(self.v[: self.n_owned], 0.0)
         self.compute_forces()
+        self._stable_dt = self._stable_time_step()
 
     # ----------------------------------------------------------------- set-up helpers
     def _trim_to_owned(self) -> None:
@@ -119,33 +121,27 @@ class Simulation:
             np.einsum("pa,pa->p", self.dx, self.dx), ptr[:-1])) if end else np.full(n, np.inf)
         del self.ref, self.pairs
 
+    def _hourglass_frequencies(self) -> np.ndarray:
+        """omega_hg^2 = 2 sum_j c_ij (E_i + E_j) / m_i: a Gershgorin bound on the stiffness of
+        each particle's hourglass springs (zero without hourglass control)."""
+        n = self.n_owned
+        if not self.hourglass or not len(self.idx):
+            return np.zeros(n)
+        rows = np.repeat(np.arange(n), np.diff(self.ptr))
+        k = self.hgc * (self.youngs[rows] + self.youngs[self.idx])
+        return 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
+
     def _out_of_plane(self) -> float:
         geo = self.scene["geometry"]
         return {1: geo["area"], 2: geo["thickness"], 3: 1.0}[self.dim]
 
     def _stable_time_step(self) -> float:
-        """CFL step: dt_i = cfl * 2 / sqrt(omega_el^2 + omega_hg^2), omega_el = 2 c / l_i.
-
-        l_i is the nearest reference neighbour distance scaled by min(1, J_i)^(1/d); the
-        hourglass springs add omega_hg^2 = 2 sum_j c_ij (E_i + E_j) / (m_i |X_ij|^0) (a
-        Gershgorin bound on their stiffness).
-        """
+        """CFL step (formulations.tlsph.stable_time_step) reduced over ranks, or the fixed dt."""
         time = self.scene["time"]
         if time["dt"] > 0:
             return time["dt"]
-        n = self.n_owned
-        c = self.constants.wave_speed
-        if not hasattr(self, "_omega_hg2"):
-            self._omega_hg2 = np.zeros(n)
-            if self.hourglass and len(self.idx):
-                rows = np.repeat(np.arange(n), np.diff(self.ptr))
-                k = self.hgc * (self.youngs[rows] + self.youngs[self.idx])
-                self._omega_hg2 = 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
-        scale = np.minimum(1.0, self.J[:n]) ** (1.0 / self.dim)
-        omega_el = 2.0 * c / (self.min_spacing * scale)
-        local = np.min(2.0 / np.sqrt(omega_el ** 2 + self._omega_hg2)) if n else np.inf
-        from mpi4py import MPI
-
+        local = tlsph.stable_time_step(self.n_owned, self.J, self.min_spacing, self._omega_hg2,
+                                       self.constants.wave_speed, self.dim)
         return time["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
 
     # ----------------------------------------------------------------- the step

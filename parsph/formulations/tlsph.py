@@ -200,3 +200,16 @@ def hourglass_error(n, ptr, idx, dx, w, u, F, out):
                 num += w[p] * e * e
                 den += w[p] * dx[p, a] * dx[p, a]
         out[i] = math.sqrt(num / den) if den > 0 else 0.0
+
+
+@njit(cache=True)
+def stable_time_step(n, J, min_spacing, omega_hg2, wave_speed, dim):
+    """Largest stable step of the owned particles before the CFL factor:
+    dt_i = 2 / sqrt(omega_el^2 + omega_hg^2), omega_el = 2 c / (l_i min(1, J_i)^(1/d)),
+    l_i the nearest reference neighbour distance (compression shortens it)."""
+    dt = np.inf
+    for i in range(n):
+        scale = min(1.0, J[i]) ** (1.0 / dim) if J[i] > 0 else 0.0
+        w_el = 2.0 * wave_speed / (min_spacing[i] * scale)
+        dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
+    return dt
