@@ -55,11 +55,12 @@ class Constraint:
 class BoundaryConditions:
     """The scene's constraints on this rank's owned particles."""
 
-    def __init__(self, specs: list, masks: dict, owned_gid: np.ndarray, dim: int):
+    def __init__(self, specs: list, masks: dict, dim: int):
+        """masks: group name -> bool mask over the owned particles."""
         self.items = []
-        self.mask = np.zeros((len(owned_gid), dim), bool)
+        self.mask = np.zeros((len(masks["all"]), dim), bool)
         for spec in specs:
-            index = np.flatnonzero(masks[spec["group"]][owned_gid])
+            index = np.flatnonzero(masks[spec["group"]])
             comps = np.asarray(spec["components"], np.int64)
             self.items.append(Constraint(spec["type"], index, comps, np.asarray(spec["value"], float),
                                          spec["ramp"]))
@@ -77,10 +78,11 @@ class BoundaryConditions:
                 u[c.rows, c.cols] = d[c.cols]
 
 
-def apply_initial_conditions(specs: list, masks: dict, owned_gid, X, u, v) -> None:
-    """Initial velocity fields and initial displacement gradients on groups [scene 'initial']."""
+def apply_initial_conditions(specs: list, masks: dict, X, u, v) -> None:
+    """Initial velocity fields and initial displacement gradients on groups [scene 'initial'];
+    masks and arrays cover the owned particles."""
     for spec in specs:
-        sel = np.flatnonzero(masks[spec["group"]][owned_gid])
+        sel = np.flatnonzero(masks[spec["group"]])
         rel = X[sel] - np.asarray(spec["center"])
         if spec["type"] == "velocity":
             v[sel] = spec["value"]

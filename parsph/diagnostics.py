@@ -30,7 +30,7 @@ def angular_momentum(x: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.zeros(0)
 
 
-def probe_values(probes: list, groups: dict, state) -> dict:
+def probe_values(probes: list, state) -> dict:
     """Each probe's value: the reduction of a particle quantity over its group."""
     out = {}
     comm = state.comm

@@ -53,7 +53,6 @@ class Simulation:
             self.X = np.ascontiguousarray(body.X[local])
             self.mass = body.mass[local]
             self.volume = body.volume[local]
-            self.groups = body.groups
             # rows for owned particles and for ghosts whose neighbourhood is complete
             rows = self.decomp.n_rows
             support = body.support[local]
@@ -61,6 +60,8 @@ class Simulation:
             self.ref = reference_pairs(self.X, body.measure[local], support, local, self.pairs,
                                        scene["kernel"]["type"])
         self._trim_to_owned()
+        own = self.gid[: self.n_owned]
+        self.groups = {name: mask[own] for name, mask in body.groups.items()}  # owned only
         n_local = len(self.gid)
         self.u = np.zeros((n_local, dim))
         self.v = np.zeros((n_local, dim))
@@ -75,10 +76,9 @@ class Simulation:
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
         self.damping = scene["time"]["damping"]
 
-        own = self.gid[: self.n_owned]
-        apply_initial_conditions(scene["initial"], self.groups, own, self.X[: self.n_owned],
+        apply_initial_conditions(scene["initial"], self.groups, self.X[: self.n_owned],
                                  self.u[: self.n_owned], self.v[: self.n_owned])
-        self.bcs = BoundaryConditions(scene["bc"], self.groups, own, dim)
+        self.bcs = BoundaryConditions(scene["bc"], self.groups, dim)
         self.free = ~self.bcs.mask
         self.t = 0.0
         self.step_count = 0
@@ -222,7 +222,7 @@ class Simulation:
 
     # ----------------------------------------------------------------- read-outs
     def group_index(self, name: str) -> np.ndarray:
-        return np.flatnonzero(self.groups[name][self.gid[: self.n_owned]])
+        return np.flatnonzero(self.groups[name])
 
     def quantity(self, name: str, sel: np.ndarray) -> np.ndarray:
         """A particle quantity on the owned particles `sel` (probes and snapshots)."""
@@ -266,5 +266,5 @@ class Simulation:
     def diagnostics(self) -> dict:
         out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt}
         out.update(global_diagnostics(self))
-        out.update(probe_values(self.scene["probes"], self.groups, self))
+        out.update(probe_values(self.scene["probes"], self))
         return out
