@@ -50,8 +50,13 @@ def _spacing(parts: list, X: np.ndarray, measure: np.ndarray, dim: int) -> np.nd
 def build_body(scene: dict) -> Body:
     """Generate the particles of `scene`; raises InputError for an empty or degenerate set."""
     dim = scene["scene"]["dimension"]
+    parts = []
+    for i, part in enumerate(scene["geometry"]["parts"]):
+        try:
+            parts.append(_part(part))
+        except ValueError as exc:
+            raise InputError(f"geometry.parts[{i}]: {exc}") from None
     try:
-        parts = [_part(p) for p in scene["geometry"]["parts"]]
         if len(parts) == 1:
             X, measure = parts[0]
         else:

@@ -9,21 +9,21 @@ import time
 import numpy as np
 
 from parsph import config
-from parsph.build import build_body
 from parsph.errors import InputError
 from parsph.io.history import HistoryWriter
 from parsph.io.snapshots import SnapshotWriter
 from parsph.parallel.runtime import COMM, collective, say
 from parsph.progress import Progress
-from parsph.solver import Simulation
 
 RUN_FILES = ("history.h5", "snapshots.h5", "snapshots.xdmf", "scene.json")
 PROBE_UNITS = {"displacement": "m", "velocity": "m/s", "position": "m", "reaction": "N", "force": "N",
                "J": "1", "von_mises": "Pa", "disorder": "1"}
 
 
-def prepare_output(out_dir: str, overwrite: bool) -> None:
-    """Rank 0 checks the output directory; a previous run's files are kept unless --overwrite."""
+def check_output(out_dir: str, overwrite: bool) -> list:
+    """Rank 0 checks the output directory, changing nothing; returns the previous run's
+    files there (to be replaced: only with --overwrite)."""
+    present = []
     with collective():
         if COMM.rank == 0:
             if os.path.exists(out_dir) and not os.path.isdir(out_dir):
@@ -33,6 +33,14 @@ def prepare_output(out_dir: str, overwrite: bool) -> None:
                 raise InputError(
                     f"output directory {out_dir} already holds a run ({', '.join(present)}); "
                     "choose another --out or pass --overwrite to replace it")
+    return present
+
+
+def claim_output(out_dir: str, present: list) -> None:
+    """Create the output directory and remove the previous run's files (--overwrite), once
+    the new run has been set up without error."""
+    with collective():
+        if COMM.rank == 0:
             os.makedirs(out_dir, exist_ok=True)
             for f in present:
                 os.remove(os.path.join(out_dir, f))
@@ -63,15 +71,19 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         scene = config.load(scene_path, overrides)
     name = scene["scene"]["name"]
     out_dir = out_dir or os.path.join("results", name)
-    prepare_output(out_dir, overwrite)
+    previous = check_output(out_dir, overwrite)
     scene_json = config.to_json(scene)
+    from parsph.build import build_body
+    from parsph.solver import Simulation
+
+    start = time.perf_counter()
     with collective():
         body = build_body(scene)
     count = body.count
-    start = time.perf_counter()
     sim = Simulation(scene, body, COMM)
     del body
     setup_seconds = time.perf_counter() - start
+    claim_output(out_dir, previous)
     say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 

@@ -158,7 +158,7 @@ class Simulation:
             where = ", ".join(f"{c:.6g}" for c in x)
             raise ParsphError(
                 f"particle {int(self.gid[bad])} at ({where}) is inverted or its stress is not finite "
-                f"(J = {self.J[bad]:.4g}) at step {self.step_count}, t = {self.t:.6g}; the run is "
+                f"(J = {self.J[bad]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
                 "unstable: reduce time.cfl, raise formulation.hourglass or refine the particles")
         self.strain_energy_local = energy
         if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:

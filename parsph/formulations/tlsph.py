@@ -32,12 +32,29 @@ only the terms it uses. Compiled code is cached on disk per combination.
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
 
 import numpy as np
 from numba import njit
 
+from parsph.materials import elastic
 from parsph.materials.elastic import det, stress
+
+
+def _source_hash() -> str:
+    """Hash of the source the compiled stages are made from. Numba keys a cached closure by
+    its own bytecode and captured values only, not by the functions it inlines; capturing
+    this hash makes any change to these files (or a process still running old code) miss
+    the stale cache entries instead of loading them."""
+    digest = hashlib.sha256()
+    for path in (__file__, elastic.__file__):
+        with open(path, "rb") as fh:
+            digest.update(fh.read())
+    return digest.hexdigest()
+
+
+_SOURCE_HASH = _source_hash()
 
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
@@ -51,17 +68,20 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int):
     The switches are closure constants; the stage bodies are inlined, so branches on them
     are folded away by the compiler.
     """
+    source = _SOURCE_HASH
 
     @njit(cache=True)
     def kinematics_stress(n, ptr, idx, g, dx, hgc, u, volume, youngs, lam, mu, bulk, F, VP, J, psi):
         """Stage 1 for particles 0..n-1; returns (strain energy, hourglass potential,
         first inverted particle or -1)."""
+        source  # noqa: B018 - keys the disk cache to the source text
         return _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, youngs, lam,
                            mu, bulk, F, VP, J, psi)
 
     @njit(cache=True)
     def forces(n, ptr, idx, g, g_rev, g_sum, dx, hgc, u, F, VP, youngs, f_int, f_hg):
         """Stage 2 for particles 0..n-1: internal force f_int and, if enabled, f_hg."""
+        source  # noqa: B018 - keys the disk cache to the source text
         _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, u, F, VP, youngs,
                 f_int, f_hg)
 
@@ -90,11 +110,11 @@ def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, young
                 for b in range(dim):
                     F[i, a, b] += du * g[p, b]
         e = stress(model, F[i], dim, lam, mu, bulk, P, S, C, Cinv)
-        if not math.isfinite(e) and first_bad < 0:
+        J[i] = det(F[i], dim)
+        if not (math.isfinite(e) and J[i] > 0.0) and first_bad < 0:
             first_bad = i
         psi[i] = e
         energy += volume[i] * e
-        J[i] = det(F[i], dim)
         for a in range(dim):
             for b in range(dim):
                 VP[i, a, b] = volume[i] * P[a, b]

@@ -82,9 +82,12 @@ def box(lower, upper, spacing, placement="cell"):
     for k in range(lo.size):
         length = hi[k] - lo[k]
         count = round(length / h0)
-        if count < 1 or abs(length / count - h0) > 1e-6 * h0:
-            raise ValueError(f"box: the box length {length!r} on axis {k} is not a multiple of "
-                             f"spacing={h0!r} (to 1e-6 relative)")
+        if count < 1:
+            raise ValueError(f"box: the box length {float(length):g} on axis {k} is shorter than "
+                             f"half the spacing {float(h0):g}: no particle fits")
+        if abs(length / count - h0) > 1e-6 * h0:
+            raise ValueError(f"box: the box length {float(length):g} on axis {k} is not a multiple of "
+                             f"spacing={float(h0):g} (to 1e-6 relative)")
         h = length / count
         if placement == "cell":
             coords.append(lo[k] + (np.arange(count) + 0.5) * h)

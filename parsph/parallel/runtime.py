@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import time
 
 from mpi4py import MPI
 
@@ -74,12 +75,18 @@ def fail_all(exc: BaseException) -> int:
         return exc.exit_code
     if isinstance(exc, ParsphError):
         print(f"parsph: error on rank {COMM.rank}: {exc}", file=sys.stderr, flush=True)
-        COMM.Abort(exc.exit_code)
+        _abort(exc.exit_code)
     import traceback
 
     print(f"parsph: error on rank {COMM.rank}: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
     traceback.print_exception(exc, file=sys.stderr)
     sys.stderr.flush()
     if COMM.size > 1:
-        COMM.Abort(1)
+        _abort(1)
     return 1
+
+
+def _abort(code: int) -> None:
+    """End every rank; first give the launcher a moment to forward this rank's stderr."""
+    time.sleep(0.5)
+    COMM.Abort(code)

@@ -1,0 +1,393 @@
+"""The `parsph` command line: bad input, the output directory, `check`, `info`, a 2-rank run.
+
+Bad input must end with one clear message naming the problem, exit code 2 and no
+traceback, on one rank and under `mpiexec -n 2` (where rank 0 prints it exactly once).
+Every scene used here is generated under pytest's tmp_path from BAR, a copy of
+runs/bar1d.toml (a 40-particle 1D bar), so the tests do not depend on edits to runs/.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import pytest
+
+from conftest import RUNS, parsph
+
+# A copy of runs/bar1d.toml without the comments: 40 particles on the nodes of [0, 1] m.
+BAR = """\
+[scene]
+name = "bar1d"
+dimension = 1
+
+[geometry]
+area = 1.0e-4
+[[geometry.parts]]
+shape = "box"
+lower = [0.0]
+upper = [1.0]
+spacing = 0.02564102564102564
+placement = "node"
+
+[kernel]
+type = "cubic_spline"
+support = 2.1
+
+[material]
+model = "saint_venant_kirchhoff"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.0
+
+[formulation]
+type = "tlsph"
+hourglass = 0.0
+
+[time]
+end = 3.2e-3
+cfl = 0.5
+
+[groups.A]
+nearest = [0.0]
+[groups.B]
+nearest = [1.0]
+[groups.right_quarter]
+box = { lower = [0.75], upper = [1.0] }
+
+[[initial]]
+type = "velocity"
+group = "right_quarter"
+value = [5.0]
+
+[[bc]]
+type = "fixed"
+group = "A"
+
+[[probes]]
+name = "tip_displacement"
+group = "B"
+quantity = "displacement"
+component = 0
+
+[output]
+history_interval = 1.0e-5
+"""
+
+# A small 2D scene (random particles in a patch) for the "zero particles" count.
+PATCH_2D = """\
+[scene]
+name = "patch"
+dimension = 2
+
+[geometry]
+[[geometry.parts]]
+shape = "random_patch"
+lower = [0.0, 0.0]
+upper = [1.0, 0.1]
+count = 0
+
+[material]
+model = "neo_hookean"
+density = 1000.0
+youngs_modulus = 1.0e6
+poisson_ratio = 0.3
+
+[time]
+end = 1.0e-3
+"""
+
+RUN_FILES = ("history.h5", "snapshots.h5", "snapshots.xdmf", "scene.json")
+RANKS = [pytest.param(1, id="1rank"), pytest.param(2, id="2ranks", marks=pytest.mark.mpi)]
+QUICK = ["--set", "time.max_steps=20", "--quiet"]
+
+
+def edit(old: str, new: str, text: str = BAR) -> str:
+    """`text` with the one occurrence of `old` replaced (fails loudly if BAR changes)."""
+    assert text.count(old) == 1, f"{old!r} must occur once in the base scene"
+    return text.replace(old, new)
+
+
+def write(tmp_path: Path, text: str | bytes, name: str = "scene.toml") -> Path:
+    path = tmp_path / name
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    return path
+
+
+@dataclass
+class Case:
+    """One bad input: how to make the scene argument, extra arguments, expected stderr parts."""
+
+    make: Callable[[Path], Path]
+    expect: list[str]
+    args: list[str] = field(default_factory=list)
+    build: bool = False  # found only by `run` (geometry, groups, output directory), not by `check`
+
+
+def scene(text):
+    return lambda tmp: write(tmp, text)
+
+
+def occupied_out(tmp: Path) -> Path:
+    """The bar scene; the --out path given by the test is an existing regular file."""
+    (tmp / "out").write_text("not a directory\n")
+    return write(tmp, BAR)
+
+
+BAD_INPUT = {
+    "unknown-top-level-key": Case(
+        scene(BAR + "\n[solver]\nthreads = 2\n"), ["unknown key 'solver'"]),
+    "unknown-top-level-key-typo": Case(
+        scene(edit("[material]", "[materal]")),
+        ["unknown key 'materal'", "did you mean 'material'"]),
+    "unknown-nested-key-suggestion": Case(
+        scene(edit("youngs_modulus =", "youngs_modulous =")),
+        ["material.youngs_modulous", "did you mean 'youngs_modulus'"]),
+    "unknown-key-in-array-table": Case(
+        scene(edit('type = "fixed"\ngroup = "A"', 'type = "fixed"\ngrup = "A"')),
+        ["bc[0].grup", "did you mean 'group'"]),
+    "missing-required-key": Case(
+        scene(edit("density = 7850.0\n", "")), ["missing required key 'material.density'"]),
+    "missing-required-model-key": Case(
+        scene(edit("youngs_modulus = 200.0e9\n", "")),
+        ["missing required key 'material.youngs_modulus'", "saint_venant_kirchhoff"]),
+    "wrong-type": Case(
+        scene(edit("density = 7850.0", 'density = "heavy"')),
+        ["material.density", "must be a number", "'heavy'"]),
+    "negative-density": Case(
+        scene(edit("density = 7850.0", "density = -7850.0")),
+        ["material.density", "must be > 0", "-7850"]),
+    "poisson-ratio-0.5-compressible-neo-hookean": Case(
+        scene(edit("poisson_ratio = 0.0", "poisson_ratio = 0.5",
+                   edit('"saint_venant_kirchhoff"', '"neo_hookean"'))),
+        ["material.poisson_ratio", "0.5"]),
+    "zero-particles-count": Case(scene(PATCH_2D), ["geometry.parts[0].count", "must be > 0"]),
+    "zero-particles-no-parts": Case(
+        scene(edit('[[geometry.parts]]\nshape = "box"\nlower = [0.0]\nupper = [1.0]\n'
+                   'spacing = 0.02564102564102564\nplacement = "node"\n', "parts = []\n")),
+        ["geometry.parts is empty"]),
+    "zero-particles-box-shorter-than-spacing": Case(
+        scene(edit("upper = [1.0]\nspacing", "upper = [0.01]\nspacing")), ["geometry.parts", "spacing"],
+        build=True),
+    "group-selects-no-particles": Case(
+        scene(edit("[groups.A]\nnearest = [0.0]", "[groups.A]\nbox = { lower = [2.0], upper = [3.0] }")),
+        ["group 'A' selects no particles", "groups.A"], build=True),
+    "undefined-group": Case(
+        scene(edit('type = "fixed"\ngroup = "A"', 'type = "fixed"\ngroup = "AA"')),
+        ["bc[0].group", "'AA'", "not defined"]),
+    "file-not-found": Case(lambda tmp: tmp / "no_such_scene.toml", ["not found", "no_such_scene.toml"]),
+    "directory-as-scene": Case(lambda tmp: tmp, ["is a directory"]),
+    "invalid-toml": Case(
+        scene(edit("cfl = 0.5", "cfl = 0.5.5")),
+        ["not valid TOML", "scene.toml", f"line {BAR.splitlines().index('cfl = 0.5') + 1}"]),
+    "non-toml-text": Case(scene("This is not a scene file.\n"), ["not valid TOML"]),
+    "binary-file": Case(
+        scene(b"\x89HDF\r\n\x1a\n\xff\xfe\x00\x01" + bytes(range(128, 256))),
+        ["not valid TOML", "scene.toml"]),
+    "set-bad-type": Case(
+        scene(BAR), ["material.density", "must be a number", "'abc'"], ["--set", "material.density=abc"]),
+    "set-unknown-key": Case(
+        scene(BAR), ["material.youngs_modulous", "did you mean 'youngs_modulus'"],
+        ["--set", "material.youngs_modulous=1e9"]),
+    "set-without-equals": Case(scene(BAR), ["--set", "key.path=value"], ["--set", "material.density"]),
+    "set-no-such-array-entry": Case(scene(BAR), ["bc.3", "no such entry"], ["--set", "bc.3.ramp=0.1"]),
+    "out-is-a-file": Case(occupied_out, ["exists and is not a directory"], build=True),
+}
+
+
+def assert_bad_input(proc, expect: list[str]) -> None:
+    """Exit code 2, every expected part in stderr, one message, no traceback or abort."""
+    err = proc.stderr
+    assert proc.returncode == 2, f"exit code {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{err}"
+    assert "Traceback" not in err, err
+    assert "Abort" not in err, err  # an agreed error must not go through MPI_Abort
+    for part in expect:
+        assert part in err, f"{part!r} not in stderr:\n{err}"
+    # printed once, by rank 0, even under several ranks
+    assert err.count("parsph: error") == 1, err
+    assert err.count(expect[0]) == 1, err
+
+
+def bad_input_params():
+    """Each case on one rank and under mpiexec -n 2. Scene errors (found by config.load, the
+    same code for `check` and `run`) are run as `check` on one rank and as `run` on two
+    ranks, to keep the suite fast (`run` imports the solver first: ~1 s more per case);
+    errors only `run` finds are run as `run` on both."""
+    for name, case in BAD_INPUT.items():
+        commands = [("run", 1), ("run", 2)] if case.build else [("check", 1), ("run", 2)]
+        for command, ranks in commands:
+            yield pytest.param(name, command, ranks, id=f"{name}-{command}-{ranks}rank{'s' * (ranks > 1)}",
+                               marks=[pytest.mark.mpi] if ranks > 1 else [])
+
+
+@pytest.mark.parametrize(("name", "command", "ranks"), list(bad_input_params()))
+def test_bad_input_exit_2_with_one_clear_message(name, command, ranks, tmp_path):
+    case = BAD_INPUT[name]
+    path = case.make(tmp_path)
+    out = tmp_path / "out"
+    args = ["run", path, "--out", out, *QUICK] if command == "run" else ["check", path]
+    proc = parsph([*args, *case.args], ranks=ranks, timeout=120)
+    assert_bad_input(proc, case.expect)
+    assert proc.stdout == ""
+    assert not (out / "history.h5").exists()  # nothing was run
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
+                    reason="root reads files regardless of their permissions")
+@pytest.mark.parametrize("ranks", RANKS)
+def test_unreadable_scene(ranks, tmp_path):
+    path = write(tmp_path, BAR)
+    path.chmod(0)
+    try:
+        proc = parsph(["run", path, "--out", tmp_path / "out", *QUICK], ranks=ranks, timeout=120)
+    finally:
+        path.chmod(0o644)
+    assert_bad_input(proc, ["not readable", str(path)])
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+@pytest.mark.parametrize("argv", [["run"], ["frobnicate"], ["run", "x.toml", "--bogus"]],
+                         ids=["missing-scene", "unknown-command", "unknown-option"])
+def test_usage_error(argv, ranks):
+    proc = parsph(argv, ranks=ranks, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.count("usage: parsph") == 1, proc.stderr
+    assert proc.stderr.count("parsph: error:") == 1, proc.stderr
+
+
+def test_box_shorter_than_spacing_message(tmp_path):
+    path = write(tmp_path, edit("upper = [1.0]\nspacing", "upper = [0.01]\nspacing"))
+    proc = parsph(["run", path, "--out", tmp_path / "out", *QUICK], timeout=120)
+    assert_bad_input(proc, ["geometry.parts[0]", "0.01"])
+    assert "np.float64" not in proc.stderr
+
+
+# ------------------------------------------------------------------ the output directory
+def snapshot_files(out: Path) -> dict:
+    return {f: ((out / f).read_bytes(), (out / f).stat().st_mtime_ns) for f in RUN_FILES}
+
+
+@pytest.mark.mpi
+def test_output_directory_holds_a_run(tmp_path):
+    """A second run into the same --out is refused (and nothing is touched) unless
+    --overwrite; a file of the user's survives even --overwrite."""
+    path = write(tmp_path, BAR)
+    out = tmp_path / "D"
+    first = parsph(["run", path, "--out", out, *QUICK], timeout=120)
+    assert first.returncode == 0, first.stderr
+    assert "Traceback" not in first.stderr
+    for f in RUN_FILES:
+        assert (out / f).is_file(), f
+    json.loads((out / "scene.json").read_text())
+    notes = out / "my_notes.txt"
+    notes.write_text("the user's own file\n")
+    before = snapshot_files(out)
+
+    for ranks in (1, 2):
+        again = parsph(["run", path, "--out", out, *QUICK], ranks=ranks, timeout=120)
+        assert_bad_input(again, ["already holds a run", str(out), "--overwrite"])
+        assert snapshot_files(out) == before, f"a refused run changed the previous run ({ranks} ranks)"
+        assert notes.read_text() == "the user's own file\n"
+
+    replaced = parsph(["run", path, "--out", out, "--overwrite", *QUICK], ranks=2, timeout=120)
+    assert replaced.returncode == 0, replaced.stderr
+    assert "Traceback" not in replaced.stderr
+    assert "replacing the previous run" in replaced.stdout  # never silently
+    assert replaced.stdout.count("replacing the previous run") == 1
+    after = snapshot_files(out)
+    for f in RUN_FILES:
+        assert after[f][1] != before[f][1], f"{f} was not rewritten by --overwrite"
+    assert notes.read_text() == "the user's own file\n", "--overwrite deleted a file that is not a run file"
+
+
+def test_overwrite_keeps_previous_run_when_new_scene_is_bad(tmp_path):
+    good = write(tmp_path, BAR, "good.toml")
+    bad = write(tmp_path, edit("[groups.A]\nnearest = [0.0]",
+                               "[groups.A]\nbox = { lower = [2.0], upper = [3.0] }"), "bad.toml")
+    out = tmp_path / "D"
+    first = parsph(["run", good, "--out", out, *QUICK], timeout=120)
+    assert first.returncode == 0, first.stderr
+    before = snapshot_files(out)
+    proc = parsph(["run", bad, "--out", out, "--overwrite", *QUICK], timeout=120)
+    assert_bad_input(proc, ["group 'A' selects no particles"])
+    assert all((out / f).exists() for f in RUN_FILES), "bad input destroyed the previous run"
+    assert snapshot_files(out) == before
+
+
+# ------------------------------------------------------------------ check, info, run
+@pytest.mark.parametrize("ranks", RANKS)
+def test_check_prints_resolved_scene(ranks):
+    proc = parsph(["check", RUNS / "bar1d.toml"], ranks=ranks, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
+    scene = json.loads(proc.stdout)  # a single JSON document: printed once
+    assert scene["scene"]["name"] == "bar1d"
+    assert scene["formulation"]["force_form"] == "pair"
+    assert scene["kernel"]["neighbours"] == 0
+    assert scene["time"]["dt"] == 0.0 and scene["time"]["max_steps"] == 0
+    assert scene["output"]["history_every"] == 10
+    assert scene["bc"][0]["components"] == [0] and scene["bc"][0]["value"] == [0.0]
+    assert scene["groups"]["all"] == {"all": True}
+
+
+def test_check_applies_set(tmp_path):
+    proc = parsph(["check", write(tmp_path, BAR), "--set", "time.end=1e-4",
+                   "--set", "bc.0.ramp=0.5", "--set", "formulation.force_form=virtual_work"])
+    assert proc.returncode == 0, proc.stderr
+    scene = json.loads(proc.stdout)
+    assert scene["time"]["end"] == 1e-4
+    assert scene["bc"][0]["ramp"] == 0.5
+    assert scene["formulation"]["force_form"] == "virtual_work"
+
+
+def info_value(stdout: str, key: str) -> str:
+    found = re.findall(rf"^{re.escape(key)}\s{{2,}}(.*)$", stdout, re.M)
+    assert len(found) == 1, f"{key!r} must appear once in:\n{stdout}"
+    return found[0].strip()
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+def test_info(ranks):
+    import h5py
+
+    proc = parsph(["info"], ranks=ranks, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert info_value(proc.stdout, "MPI ranks") == str(ranks)
+    assert info_value(proc.stdout, "parsph")  # every line once: not printed by each rank
+    assert len(info_value(proc.stdout, "numba threads per rank").split(",")) == ranks
+    if h5py.get_config().mpi:
+        assert info_value(proc.stdout, "parallel HDF5") == "yes"
+    else:
+        assert info_value(proc.stdout, "parallel HDF5").startswith("no")
+
+
+@pytest.mark.mpi
+def test_run_two_ranks_writes_finite_history(tmp_path):
+    import h5py
+    import numpy as np
+
+    out = tmp_path / "out"
+    proc = parsph(["run", RUNS / "bar1d.toml", "--out", out, "--set", "time.max_steps=50", "--quiet"],
+                  ranks=2, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "2 rank(s)" in proc.stdout and proc.stdout.count("parsph: scene") == 1
+    with h5py.File(out / "history.h5", "r") as f:
+        series = {name: np.asarray(f[name])
+                  for name in ("time", "step", "kinetic_energy", "tip_displacement")}
+    for name, values in series.items():
+        assert values.ndim == 1 and len(values) >= 2, name
+        assert np.all(np.isfinite(values)), name
+    assert np.all(np.diff(series["time"]) > 0)
+    assert series["step"][-1] == 50
+    assert series["kinetic_energy"][0] > 0  # the right quarter starts at 5 m/s
+    assert series["tip_displacement"][-1] > 0  # ... and moves right
