@@ -33,6 +33,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key, e.g. --set time.end=1e-3 --set bc.0.ramp=0.1")
     r.add_argument("--overwrite", action="store_true", help="replace a previous run in --out")
+    r.add_argument("--restart", metavar="CHECKPOINT",
+                   help="continue from a checkpoint file, or 'latest' (newest valid one in OUT/checkpoints)")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
     c = sub.add_parser("check", help="validate a scene and print it resolved, with defaults")
     c.add_argument("scene")
@@ -86,7 +88,7 @@ def main(argv=None) -> int:
         if args.command == "run":
             from parsph.run import run
 
-            run(args.scene, args.out, args.set, args.overwrite, args.quiet)
+            return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart)
         elif args.command == "check":
             import json
 

@@ -112,6 +112,8 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "cfl": Key("float", 0.3, in_range(0.0, 1.0, True), "safety factor of the CFL time step"),
         "damping": Key("float", 0.0, non_negative, "mass-proportional damping rate [1/s]"),
         "max_steps": Key("int", 0, non_negative, "stop after this many steps (0 = no limit)"),
+        "wall_limit": Key("float", 0.0, non_negative,
+                          "wall-clock seconds after which the run checkpoints and stops (0 = none)"),
     },
     "loads": {
         "body_acceleration": Key("vector", None, doc="uniform body force per unit mass [m/s^2]"),
@@ -123,6 +125,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "snapshot_fields": Key("strlist", ["position", "displacement", "velocity", "J", "von_mises", "rank"],
                               snapshot_fields),
         "progress_seconds": Key("float", 5.0, positive, "seconds between progress lines when not on a terminal"),
+        "checkpoint_interval": Key("float", 0.0, non_negative, "simulated time between checkpoints (0 = none)"),
+        "checkpoint_every": Key("int", 0, non_negative, "steps between checkpoints (0 = none)"),
+        "checkpoint_keep": Key("int", 2, positive, "how many of the newest checkpoints to keep"),
     },
 }
 

@@ -1,15 +1,20 @@
-"""`parsph run`: load the scene, build, step to the end time, write history and snapshots."""
+"""`parsph run`: load the scene (or a checkpoint), step to the end time, write history,
+snapshots and checkpoints; stop cleanly with a checkpoint on SIGTERM/SIGINT or at the
+wall-clock limit."""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import time
 
 import numpy as np
+from mpi4py import MPI
 
 from parsph import config
 from parsph.errors import InputError
+from parsph.io import checkpoint
 from parsph.io.history import HistoryWriter
 from parsph.io.snapshots import SnapshotWriter
 from parsph.parallel.runtime import COMM, collective, say
@@ -32,7 +37,7 @@ def check_output(out_dir: str, overwrite: bool) -> list:
             if present and not overwrite:
                 raise InputError(
                     f"output directory {out_dir} already holds a run ({', '.join(present)}); "
-                    "choose another --out or pass --overwrite to replace it")
+                    "choose another --out, pass --overwrite to replace it, or --restart latest to continue it")
     return present
 
 
@@ -51,9 +56,9 @@ def claim_output(out_dir: str, present: list) -> None:
 class Schedule:
     """Fires every `interval` of simulated time, or every `every` steps if interval is 0."""
 
-    def __init__(self, interval: float, every: int):
+    def __init__(self, interval: float, every: int, next_time: float | None = None):
         self.interval, self.every = interval, every
-        self.next = interval
+        self.next = interval if next_time is None else next_time
 
     def due(self, t: float, step: int) -> bool:
         if self.interval > 0:
@@ -65,52 +70,108 @@ class Schedule:
         return self.every > 0 and step % self.every == 0
 
 
-def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool) -> dict:
-    """Run a scene; returns the last diagnostics row."""
+class StopRequest:
+    """SIGTERM/SIGINT and the wall-clock limit, agreed on by all ranks at a step's end."""
+
+    def __init__(self, wall_limit: float):
+        self.signal = 0
+        self.wall_limit = wall_limit
+        self.start = time.monotonic()
+        self.previous = {}
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            self.previous[sig] = signal.signal(sig, self._handle)
+
+    def _handle(self, signum, frame):
+        self.signal = signum
+
+    def check(self) -> int:
+        """0 to go on; else the signal number, or -1 for the wall-clock limit (collective)."""
+        flags = np.array([self.signal,
+                          bool(self.wall_limit) and time.monotonic() - self.start >= self.wall_limit])
+        if COMM.size > 1:
+            COMM.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        return int(flags[0]) or -int(flags[1])
+
+    def restore(self) -> None:
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
+
+
+def _setup(scene_path, out_dir, overrides, overwrite, restart):
+    """The scene, output directory, reference body and checkpoint data of a run."""
     with collective():
         scene = config.load(scene_path, overrides)
-    name = scene["scene"]["name"]
-    out_dir = out_dir or os.path.join("results", name)
-    previous = check_output(out_dir, overwrite)
-    scene_json = config.to_json(scene)
-    from parsph.build import build_body
+    out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
+    from parsph.build import Body, build_body
+
+    if restart is None:
+        previous = check_output(out_dir, overwrite)
+        with collective():
+            body = build_body(scene)
+        return scene, out_dir, previous, body, None
+    path = checkpoint.choose(restart, out_dir)
+    data = checkpoint.load(path, COMM)
+    with collective():
+        checkpoint.check_compatible(data["scene"], scene, path)
+    groups = {name: data["groups"][:, k].astype(bool) for k, name in enumerate(data["group_names"])}
+    body = Body(X=data["X"], measure=data["measure"], volume=data["volume"], mass=data["mass"],
+                support=data["support"], groups=groups)
+    say(f"parsph: restarting from {path} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
+    return scene, out_dir, [], body, data
+
+
+def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool,
+        restart: str | None = None) -> int:
+    """Run a scene (or continue it from a checkpoint); returns the exit code."""
+    scene, out_dir, previous, body, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
     from parsph.solver import Simulation
 
+    name = scene["scene"]["name"]
+    scene_json = config.to_json(scene)
     start = time.perf_counter()
-    with collective():
-        body = build_body(scene)
     count = body.count
-    sim = Simulation(scene, body, COMM)
+    sim = Simulation(scene, body, COMM, restart=data)
     del body
     setup_seconds = time.perf_counter() - start
-    claim_output(out_dir, previous)
+    if data is None:
+        claim_output(out_dir, previous)
     say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 
     out = scene["output"]
+    resume = None if data is None else sim.step_count
+    nexts = {} if data is None else data["schedules"]
     history = None
     if COMM.rank == 0:
         with open(os.path.join(out_dir, "scene.json"), "w") as fh:
             json.dump(scene, fh, indent=2, sort_keys=True)
         units = {p["name"]: PROBE_UNITS[p["quantity"]] for p in scene["probes"]}
-        history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units)
-    snapshots = SnapshotWriter(out_dir, scene_json, COMM)
-    history_due = Schedule(out["history_interval"], out["history_every"])
-    snapshot_due = Schedule(out["snapshot_interval"], 0)
+        history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units, resume)
+    snapshots = SnapshotWriter(out_dir, scene_json, COMM, resume)
+    history_due = Schedule(out["history_interval"], out["history_every"], nexts.get("history"))
+    snapshot_due = Schedule(out["snapshot_interval"], 0, nexts.get("snapshot"))
+    checkpoint_due = Schedule(out["checkpoint_interval"], out["checkpoint_every"], nexts.get("checkpoint"))
     end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
     progress = Progress(end, count, out["progress_seconds"], enabled=COMM.rank == 0 and not quiet)
+    stop = StopRequest(scene["time"]["wall_limit"])
 
-    def record(values=None):
-        values = values or sim.diagnostics()
+    def record():
+        values = sim.diagnostics()
         if history is not None:
             history.append(values)
         return values
 
+    def save_checkpoint():
+        schedules = {"history": history_due.next, "snapshot": snapshot_due.next,
+                     "checkpoint": checkpoint_due.next}
+        return checkpoint.write_checkpoint(out_dir, sim, schedules, scene, out["checkpoint_keep"])
+
     last = record()
-    if out["snapshot_interval"] > 0:
+    if data is None and out["snapshot_interval"] > 0:
         snapshots.write(sim, out["snapshot_fields"])
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count
+    stopped = 0
     try:
         while sim.t < end * (1 - 1e-12) and not (max_steps and sim.step_count >= max_steps):
             dt = sim.step()
@@ -119,12 +180,18 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
                 last = record()
             if snapshot_due.due(sim.t, sim.step_count):
                 snapshots.write(sim, out["snapshot_fields"])
+            stopped = stop.check()
+            if checkpoint_due.due(sim.t, sim.step_count) or stopped:
+                path = save_checkpoint()
+            if stopped:
+                break
         # the final state is always in the history and in the snapshots
         if last["step"] != sim.step_count:
             last = record()
         if not snapshots.times or snapshots.times[-1] != sim.t:
             snapshots.write(sim, out["snapshot_fields"])
     finally:
+        stop.restore()
         progress.close()
         if history is not None:
             history.close()
@@ -134,4 +201,9 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         say(f"parsph: {steps} steps to t = {sim.t:.6g} s in {loop_seconds:.2f} s: "
             f"{1e6 * loop_seconds * COMM.size / (steps * count):.3f} us per particle-step "
             f"(x {COMM.size} rank(s))")
-    return {"out_dir": out_dir, "steps": steps, "seconds": loop_seconds, "particles": count, **last}
+    if stopped:
+        why = "the wall-clock limit" if stopped < 0 else signal.Signals(stopped).name
+        say(f"parsph: stopped by {why} at step {sim.step_count}; checkpoint {path}; "
+            f"continue with: parsph run {scene_path} --out {out_dir} --restart latest")
+        return 0 if stopped < 0 else 128 + stopped
+    return 0

@@ -31,7 +31,8 @@ from parsph.parallel.runtime import collective
 class Simulation:
     """Total-Lagrangian SPH state and stepping for the particles this rank owns."""
 
-    def __init__(self, scene: dict, body: Body, comm):
+    def __init__(self, scene: dict, body: Body, comm, restart: dict | None = None):
+        """Set up this rank's particles; `restart` (io.checkpoint.load) continues a run."""
         self.scene = scene
         self.comm = comm
         self.dim = dim = scene["scene"]["dimension"]
@@ -53,11 +54,12 @@ class Simulation:
             self.X = np.ascontiguousarray(body.X[local])
             self.mass = body.mass[local]
             self.volume = body.volume[local]
+            self.measure = body.measure[local]
+            self.support = body.support[local]
             # rows for owned particles and for ghosts whose neighbourhood is complete
             rows = self.decomp.n_rows
-            support = body.support[local]
-            self.pairs = find_pairs(self.X, support, local, rows)
-            self.ref = reference_pairs(self.X, body.measure[local], support, local, self.pairs,
+            self.pairs = find_pairs(self.X, self.support, local, rows)
+            self.ref = reference_pairs(self.X, self.measure, self.support, local, self.pairs,
                                        scene["kernel"]["type"])
         self._trim_to_owned()
         own = self.gid[: self.n_owned]
@@ -76,20 +78,28 @@ class Simulation:
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
         self.damping = scene["time"]["damping"]
 
-        apply_initial_conditions(scene["initial"], self.groups, self.X[: self.n_owned],
-                                 self.u[: self.n_owned], self.v[: self.n_owned])
         self.bcs = BoundaryConditions(scene["bc"], self.groups, dim)
-        self.free = ~self.bcs.mask
         self.t = 0.0
         self.step_count = 0
         self.strain_energy_local = 0.0
         self.hourglass_energy_local = 0.0
         self.external_work_local = 0.0
         self._omega_hg2 = self._hourglass_frequencies()
-        self.bcs.set_displacement(self.u[: self.n_owned], 0.0)
-        self.bcs.set_velocity(self.v[: self.n_owned], 0.0)
+        own = self.gid[: self.n_owned]
+        if restart is None:
+            apply_initial_conditions(scene["initial"], self.groups, self.X[: self.n_owned],
+                                     self.u[: self.n_owned], self.v[: self.n_owned])
+            self.bcs.set_displacement(self.u[: self.n_owned], 0.0)
+            self.bcs.set_velocity(self.v[: self.n_owned], 0.0)
+        else:
+            self.u[: self.n_owned] = restart["u"][own]
+            self.v[: self.n_owned] = restart["v"][own]
+            self.t, self.step_count = restart["clock"]["t"], restart["clock"]["step"]
+            if comm.rank == 0:  # global totals, carried by rank 0
+                self.hourglass_energy_local = restart["totals"]["hourglass_work"]
+                self.external_work_local = restart["totals"]["external_work"]
         self.compute_forces()
-        self._stable_dt = self._stable_time_step()
+        self._stable_dt = restart["clock"]["dt"] if restart else self._stable_time_step()
 
     # ----------------------------------------------------------------- set-up helpers
     def _trim_to_owned(self) -> None:
@@ -99,6 +109,7 @@ class Simulation:
         keep = len(self.decomp.local_gid)
         self.gid, self.X = self.gid[:keep], self.X[:keep]
         self.mass, self.volume = self.mass[:keep], self.volume[:keep]
+        self.measure, self.support = self.measure[:keep], self.support[:keep]
         n = self.n_owned
         ptr = self.pairs.ptr[: n + 1]
         end = ptr[-1]
@@ -112,11 +123,11 @@ class Simulation:
         self.g_sum = np.ascontiguousarray(ref.g_sum[:n])
         self.dx = np.ascontiguousarray(ref.dx[:end])
         self.w = np.ascontiguousarray(ref.w[:end])
-        self.hgc = np.zeros(0)
+        self.hgc, self.hreg = np.zeros(0), np.zeros(0)
         if self.hourglass:
-            self.hgc = tlsph.hourglass_coefficients(
-                self.pairs.row_of_pair()[:end], self.idx, self.dx, ref.w[:end], self.volume,
-                self.volume / self._out_of_plane(), self.alpha)
+            self.hgc, self.hreg = tlsph.hourglass_coefficients(
+                self.hourglass_form, self.pairs.row_of_pair()[:end], self.idx, self.dx, ref.w[:end],
+                ref.h[:end], self.volume, self.volume / self._out_of_plane(), self.alpha)
         self.min_spacing = np.sqrt(np.minimum.reduceat(
             np.einsum("pa,pa->p", self.dx, self.dx), ptr[:-1])) if end else np.full(n, np.inf)
         del self.ref, self.pairs
@@ -164,9 +175,8 @@ class Simulation:
         if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
             self.hourglass_energy_local = hg_energy
         self.decomp.refresh(self.VP, *( (self.F,) if self.hourglass else ()))
-        self._forces(n, self.ptr, self.idx, self.g,
-                     self.g_rev, self.g_sum, self.dx, self.hgc, self.u, self.F, self.VP, self.youngs,
-                     self.f_int, self.f_hg)
+        self._forces(n, self.ptr, self.idx, self.g, self.g_rev, self.g_sum, self.dx, self.hgc,
+                     self.hreg, self.u, self.F, self.VP, self.youngs, self.f_int, self.f_hg)
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
@@ -219,6 +229,26 @@ class Simulation:
         if self.scene["time"]["dt"] == 0 and self.model != 0:
             self._stable_dt = self._stable_time_step()
         return dt
+
+    @property
+    def dt(self) -> float:
+        """The step size the next step will use."""
+        return self._stable_dt
+
+    def checkpoint_state(self) -> dict:
+        """Everything io.checkpoint stores, for the owned particles (collective: totals)."""
+        n = self.n_owned
+        names = sorted(self.groups)
+        totals = self.comm.allgather((self.hourglass_energy_local
+                                      if self.hourglass_form == tlsph.HOURGLASS_PAPER else 0.0,
+                                      self.external_work_local))
+        return {
+            "X": self.X[:n], "measure": self.measure[:n], "volume": self.volume[:n],
+            "mass": self.mass[:n], "support": self.support[:n], "u": self.u[:n], "v": self.v[:n],
+            "groups": np.stack([self.groups[k] for k in names], axis=1).astype(np.uint8),
+            "group_names": names,
+            "totals": {"hourglass_work": sum(h for h, _ in totals), "external_work": sum(e for _, e in totals)},
+        }
 
     # ----------------------------------------------------------------- read-outs
     def group_index(self, name: str) -> np.ndarray:

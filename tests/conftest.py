@@ -23,12 +23,12 @@ def mpiexec() -> str:
     pytest.skip("no mpiexec on PATH")
 
 
-def parsph(args, ranks: int = 1, timeout: float = 300, cwd=None) -> subprocess.CompletedProcess:
-    """Run `python -m parsph ARGS` on `ranks` ranks; returns the completed process."""
+def parsph(args, ranks: int = 1, timeout: float = 300, cwd=None, env=None) -> subprocess.CompletedProcess:
+    """Run `python -m parsph ARGS` on `ranks` ranks (extra environment `env`)."""
     cmd = [sys.executable, "-m", "parsph", *map(str, args)]
     if ranks > 1:
         cmd = [mpiexec(), "-n", str(ranks), *cmd]
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
 
 

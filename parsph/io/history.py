@@ -6,6 +6,8 @@ a killed run leaves a readable file. The resolved scene is stored as the attribu
 
 from __future__ import annotations
 
+import os
+
 import h5py
 import numpy as np
 
@@ -16,11 +18,21 @@ UNITS = {
 
 
 class HistoryWriter:
-    def __init__(self, path: str, scene_json: str, probe_units: dict):
-        self.file = h5py.File(path, "w")
-        self.file.attrs["scene"] = scene_json
+    def __init__(self, path: str, scene_json: str, probe_units: dict, resume_step: int | None = None):
+        """A new file, or (resume_step given) the existing one cut back to the rows before
+        that step, as a restarted run continues it."""
         self.probe_units = probe_units
         self.rows = 0
+        if resume_step is not None and os.path.exists(path):
+            self.file = h5py.File(path, "a")
+            if "step" in self.file:
+                self.rows = int(np.searchsorted(self.file["step"][()], resume_step))
+                for name in self.file:
+                    self.file[name].resize((self.rows,))
+            self.file.attrs["scene"] = scene_json
+            return
+        self.file = h5py.File(path, "w")
+        self.file.attrs["scene"] = scene_json
 
     def append(self, values: dict) -> None:
         for name, value in values.items():

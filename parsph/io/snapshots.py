@@ -1,9 +1,10 @@
 """`snapshots.h5`: particle fields at chosen times, in global-id order, plus an XDMF index.
 
-Each snapshot is a group `/step_NNNNNNNN` holding one dataset per field; the fields are
-gathered to rank 0, which writes them. `snapshots.xdmf` lists the snapshots as a time
-series of point clouds that ParaView opens; it is rewritten after each snapshot (to a
-temporary name, then renamed), so it stays valid if the run is killed.
+Each snapshot is a group `/step_NNNNNNNN` holding one dataset per field, written by all
+ranks together (io.h5). The file is opened for each snapshot and closed after it, so a
+killed run leaves every finished snapshot readable. `snapshots.xdmf` lists the snapshots as
+a time series of point clouds that ParaView opens; rank 0 rewrites it after each snapshot
+(to a temporary name, then renamed), so it is always valid.
 """
 
 from __future__ import annotations
@@ -13,50 +14,66 @@ import os
 import h5py
 import numpy as np
 
+from parsph.io.h5 import ParticleFile
+
 
 class SnapshotWriter:
-    def __init__(self, out_dir: str, scene_json: str, comm):
+    def __init__(self, out_dir: str, scene_json: str, comm, resume_step: int | None = None):
+        """A new file, or (resume_step given) the existing one with the snapshots after
+        that step removed, as a restarted run continues it."""
         self.comm = comm
         self.path = os.path.join(out_dir, "snapshots.h5")
         self.xdmf = os.path.join(out_dir, "snapshots.xdmf")
-        self.entries = []
-        self.times = []  # on every rank: when snapshots were taken
+        self.entries = []  # rank 0: (time, group, count, field shapes)
+        self.times = []  # every rank: when snapshots were taken
         if comm.rank == 0:
-            with h5py.File(self.path, "w") as f:
-                f.attrs["scene"] = scene_json
+            if resume_step is None or not os.path.exists(self.path):
+                with h5py.File(self.path, "w") as f:
+                    f.attrs["scene"] = scene_json
+            else:
+                with h5py.File(self.path, "a") as f:
+                    for name in sorted(k for k in f if k.startswith("step_")):
+                        grp = f[name]
+                        if grp.attrs["step"] > resume_step:
+                            del f[name]
+                            continue
+                        shapes = {k: grp[k].shape[1:] for k in grp if k != "gid"}
+                        self.entries.append((float(grp.attrs["time"]), name, len(grp["gid"]), shapes))
+                self._write_xdmf()
+        self.times = comm.bcast([e[0] for e in self.entries], root=0)
 
     def write(self, sim, fields: list) -> None:
+        """Collective: one snapshot of the owned particles' `fields`."""
         n = sim.n_owned
         sel = np.arange(n)
-        local = {"gid": sim.gid[:n]}
-        for name in fields:
-            if name == "rank":
-                local[name] = np.full(n, self.comm.rank, np.int32)
-            elif name == "reference_position":
-                local[name] = sim.X[:n]
-            else:
-                local[name] = sim.quantity(name, sel)
-        self.times.append(sim.t)
-        gathered = self.comm.gather(local, root=0)
-        if self.comm.rank != 0:
-            return
-        gid = np.concatenate([g["gid"] for g in gathered])
-        order = np.argsort(gid)
+        gid = sim.gid[:n]
+        total = sim.decomp.total
         group = f"step_{sim.step_count:08d}"
-        with h5py.File(self.path, "a") as f:
-            grp = f.require_group(group)
-            grp.attrs["time"] = sim.t
-            grp.attrs["step"] = sim.step_count
-            for name in ["gid"] + list(fields):
-                data = np.concatenate([g[name] for g in gathered])[order]
-                if name == "position" and data.shape[1] < 3:
+        shapes = {}
+        first = not self.times
+        with ParticleFile(self.path, "a", self.comm) as out:
+            if first:  # explicit Polyvertex connectivity 0..n-1, for readers that need it
+                out.write_rows("connectivity", gid, gid.astype(np.int64)[:, None], total)
+            if out.writer:
+                grp = out.file.create_group(group)
+                grp.attrs["time"] = sim.t
+                grp.attrs["step"] = sim.step_count
+            out.write_rows(f"{group}/gid", gid, gid, total)
+            for name in fields:
+                if name == "rank":
+                    data = np.full(n, self.comm.rank, np.int32)
+                elif name == "reference_position":
+                    data = sim.X[:n]
+                else:
+                    data = sim.quantity(name, sel)
+                if name in ("position", "reference_position") and data.shape[1] < 3:
                     data = np.pad(data, ((0, 0), (0, 3 - data.shape[1])))
-                if name in grp:
-                    del grp[name]
-                grp.create_dataset(name, data=data)
-        self.entries.append((sim.t, group, len(gid), {k: np.concatenate([g[k] for g in gathered]).shape[1:]
-                                                      for k in fields}))
-        self._write_xdmf()
+                out.write_rows(f"{group}/{name}", gid, data, total)
+                shapes[name] = data.shape[1:]
+        self.times.append(sim.t)
+        if self.comm.rank == 0:
+            self.entries.append((sim.t, group, total, shapes))
+            self._write_xdmf()
 
     def _write_xdmf(self) -> None:
         base = os.path.basename(self.path)
@@ -64,16 +81,17 @@ class SnapshotWriter:
                  '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">']
         for t, group, n, shapes in self.entries:
             lines.append(f'<Grid Name="{group}" GridType="Uniform"><Time Value="{float(t)!r}"/>')
-            lines.append(f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}"/>')
+            lines.append(f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
+                         f'<DataItem Dimensions="{n} 1" Format="HDF" NumberType="Int" Precision="8">'
+                         f'{base}:/connectivity</DataItem></Topology>')
             lines.append(f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" Format="HDF" '
                          f'NumberType="Float" Precision="8">{base}:/{group}/position</DataItem></Geometry>')
             for name, shape in shapes.items():
                 if name == "position":
                     continue
                 kind = "Scalar" if len(shape) == 0 else "Vector" if len(shape) == 1 else "Tensor"
-                dims = " ".join(str(s) for s in (n,) + shape)
-                number = "Int" if name == "rank" else "Float"
-                size = 4 if name == "rank" else 8
+                dims = " ".join(str(s) for s in (n,) + tuple(shape))
+                number, size = ("Int", 4) if name == "rank" else ("Float", 8)
                 lines.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="Node">'
                              f'<DataItem Dimensions="{dims}" Format="HDF" NumberType="{number}" '
                              f'Precision="{size}">{base}:/{group}/{name}</DataItem></Attribute>')

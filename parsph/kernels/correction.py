@@ -34,6 +34,7 @@ class ReferencePairs:
     pairs: Pairs
     dx: np.ndarray  # (npairs, d) X_j - X_i
     w: np.ndarray  # (npairs,) W(|X_ij|, h_ij)
+    h: np.ndarray  # (npairs,) pair support h_ij = (h_i + h_j) / 2
     g: np.ndarray  # (npairs, d) V_j L_i^-1 w_ij
     g_rev: np.ndarray  # (npairs, d) g_ji: the same pair seen from j
     g_sum: np.ndarray  # (rows, d) sum_j g_ij
@@ -117,4 +118,4 @@ def reference_pairs(
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
     rev = reverse_index(pairs, len(positions))
     g_rev = np.where((rev >= 0)[:, None], g[np.maximum(rev, 0)], np.nan)
-    return ReferencePairs(pairs=pairs, dx=dx, w=w, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition)
+    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition)

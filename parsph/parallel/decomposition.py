@@ -54,6 +54,7 @@ class Decomposition:
         owner = rcb_partition(body.X, size) if size > 1 else np.zeros(body.count, np.int64)
         owned = np.flatnonzero(owner == me)
         self.n_owned = len(owned)
+        self.total = body.count  # particles over all ranks
         if size == 1:
             self.local_gid = owned
             self.n_rows = self.n_owned

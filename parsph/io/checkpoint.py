@@ -1,0 +1,194 @@
+"""Checkpoints: the complete state of a run, written atomically, and restart from them.
+
+A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the reference
+configuration (positions, measures, volumes, masses, kernel supports, group membership)
+and the state (displacement, velocity), plus the clock (time, step, dt), the accumulated
+energies, the output schedules, and the resolved scene with its hash. It is written by all
+ranks together under a temporary name, closed, and renamed, so a checkpoint either exists
+whole or not at all; the last K are kept. Every dataset carries an order-independent
+checksum; a file that does not open, lacks a dataset or fails a checksum is refused.
+Restarting needs the same physics: only end time, step limit, wall-clock limit and output
+settings may differ from the checkpoint's scene.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import os
+import re
+
+import h5py
+import numpy as np
+
+from parsph import config
+from parsph.errors import InputError
+from parsph.io.h5 import ParticleFile
+from parsph.parallel.runtime import COMM, collective, say
+
+FORMAT = 1
+PARTICLE_FIELDS = ("X", "measure", "volume", "mass", "support", "groups", "u", "v")
+# keys that may change on restart: they do not change the physics of the steps taken
+RESTART_FREE = ("time.end", "time.max_steps", "time.wall_limit", "output.", "scene.description",
+                "scene.expected", "scene.source")
+
+
+def scene_hash(scene: dict) -> str:
+    return hashlib.sha256(config.to_json(scene).encode()).hexdigest()
+
+
+def checksum(gid: np.ndarray, rows: np.ndarray) -> int:
+    """Order-independent checksum: sum over elements of bits x (position + 1), mod 2^64."""
+    bits = np.ascontiguousarray(rows).view(np.uint8).reshape(len(rows), -1)
+    words = np.zeros((len(rows), -(-bits.shape[1] // 8) * 8), np.uint8)
+    words[:, : bits.shape[1]] = bits
+    words = words.view(np.uint64)
+    weight = (np.asarray(gid, np.uint64)[:, None] * np.uint64(words.shape[1])
+              + np.arange(1, words.shape[1] + 1, dtype=np.uint64))
+    with np.errstate(over="ignore"):
+        return int(np.sum(words * weight, dtype=np.uint64))
+
+
+def _sum_mod64(comm, value: int) -> int:
+    return sum(comm.allgather(value)) % (1 << 64)
+
+
+def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int) -> str:
+    """Collective: write the run's state; returns the checkpoint's path."""
+    comm = sim.comm
+    folder = os.path.join(out_dir, "checkpoints")
+    with collective():
+        if comm.rank == 0:
+            os.makedirs(folder, exist_ok=True)
+    name = f"step_{sim.step_count:08d}.h5"
+    final = os.path.join(folder, name)
+    tmp = os.path.join(folder, f".{name}.tmp")
+    n = sim.n_owned
+    gid = sim.gid[:n]
+    state = sim.checkpoint_state()
+    sums = {}
+    with collective():
+        with ParticleFile(tmp, "w", comm) as out:
+            for field in PARTICLE_FIELDS:
+                rows = state[field]
+                out.write_rows(field, gid, rows, sim.decomp.total)
+                sums[field] = _sum_mod64(comm, checksum(gid, rows))
+            if out.writer:
+                attrs = out.file.attrs
+                attrs["format"] = FORMAT
+                attrs["scene"] = config.to_json(scene)
+                attrs["scene_hash"] = scene_hash(scene)
+                attrs["groups"] = json.dumps(state["group_names"])
+                attrs["clock"] = json.dumps({"t": sim.t, "step": sim.step_count, "dt": sim.dt})
+                attrs["totals"] = json.dumps(state["totals"])
+                attrs["schedules"] = json.dumps(schedules)
+                attrs["checksums"] = json.dumps({k: str(v) for k, v in sums.items()})
+                attrs["particles"] = sim.decomp.total
+    with collective():
+        if comm.rank == 0:
+            os.replace(tmp, final)
+            older = sorted(glob.glob(os.path.join(folder, "step_*.h5")))[:-keep]
+            for path in older:
+                os.remove(path)
+    return final
+
+
+def _validate(path: str) -> dict:
+    """Read and check a checkpoint on one process; raises ValueError saying what is wrong."""
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise ValueError(f"cannot be opened as HDF5 ({exc})") from None
+    with f:
+        try:
+            attrs = {k: f.attrs[k] for k in ("format", "scene", "scene_hash", "groups", "clock",
+                                              "totals", "schedules", "checksums", "particles")}
+        except KeyError as exc:
+            raise ValueError(f"is incomplete (attribute {exc} missing)") from None
+        if attrs["format"] != FORMAT:
+            raise ValueError(f"has format {attrs['format']}, this parsph reads format {FORMAT}")
+        total = int(attrs["particles"])
+        sums = json.loads(attrs["checksums"])
+        gid = np.arange(total)
+        for field in PARTICLE_FIELDS:
+            if field not in f or len(f[field]) != total:
+                raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
+            try:
+                data = f[field][()]
+            except OSError as exc:
+                raise ValueError(f"dataset '{field}' cannot be read ({exc})") from None
+            if str(checksum(gid, data)) != sums[field]:
+                raise ValueError(f"is corrupted (checksum of '{field}' does not match)")
+        if scene_hash(json.loads(attrs["scene"])) != attrs["scene_hash"]:
+            raise ValueError("is corrupted (scene hash does not match)")
+    return {"path": path, "scene": json.loads(attrs["scene"]), "clock": json.loads(attrs["clock"])}
+
+
+def choose(spec: str, out_dir: str) -> str:
+    """Rank 0 picks the checkpoint (`latest`: the newest valid one in OUT/checkpoints) and
+    broadcasts its path; a named checkpoint that is invalid is refused."""
+    path = None
+    with collective():
+        if COMM.rank == 0:
+            if spec == "latest":
+                found = sorted(glob.glob(os.path.join(out_dir, "checkpoints", "step_*.h5")),
+                               key=lambda p: int(re.findall(r"\d+", os.path.basename(p))[0]))
+                if not found:
+                    raise InputError(f"--restart latest: no checkpoints in {out_dir}/checkpoints")
+                for candidate in reversed(found):
+                    try:
+                        _validate(candidate)
+                        path = candidate
+                        break
+                    except ValueError as exc:
+                        say(f"parsph: skipping checkpoint {candidate}: it {exc}")
+                if path is None:
+                    raise InputError(f"--restart latest: no valid checkpoint in {out_dir}/checkpoints")
+            else:
+                if not os.path.isfile(spec):
+                    raise InputError(f"--restart: checkpoint not found: {spec}")
+                try:
+                    _validate(spec)
+                except ValueError as exc:
+                    raise InputError(f"--restart: checkpoint {spec} {exc}") from None
+                path = spec
+    return COMM.bcast(path, root=0)
+
+
+def differing_keys(old: dict, new: dict, prefix: str = "") -> list:
+    """Keys whose values differ between two resolved scenes (lists compared whole)."""
+    keys = []
+    for k in sorted(set(old) | set(new)):
+        path = f"{prefix}{k}"
+        a, b = old.get(k), new.get(k)
+        if isinstance(a, dict) and isinstance(b, dict):
+            keys += differing_keys(a, b, path + ".")
+        elif a != b:
+            keys.append(path)
+    return keys
+
+
+def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
+    """Refuse a restart whose scene changes the physics of the checkpointed run."""
+    changed = [k for k in differing_keys(old_scene, scene)
+               if not any(k == free or (free.endswith(".") and k.startswith(free)) for free in RESTART_FREE)]
+    if changed:
+        raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
+                         "only time.end, time.max_steps, time.wall_limit and output settings may change "
+                         "on restart")
+
+
+def load(path: str, comm) -> dict:
+    """Collective: the checkpoint's particle arrays (all rows, every rank) and attributes."""
+    with ParticleFile(path, "r", comm) as f:
+        data = {field: f.read_rows(field) for field in PARTICLE_FIELDS}
+        attrs = None
+        if f.writer:
+            attrs = {k: f.file.attrs[k] for k in ("scene", "groups", "clock", "totals", "schedules")}
+    attrs = comm.bcast(attrs if comm.rank == 0 else None, root=0)
+    data["scene"] = json.loads(attrs["scene"])
+    data["group_names"] = json.loads(attrs["groups"])
+    for key in ("clock", "totals", "schedules"):
+        data[key] = json.loads(attrs[key])
+    return data

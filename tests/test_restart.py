@@ -1,0 +1,190 @@
+"""Checkpoints and restart: exact continuation, other rank counts, kills, corrupt files."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import ROOT, RUNS, mpiexec, parsph
+
+FIELDS = '["position","velocity","J"]'
+PATCH = ["--set", f"output.snapshot_fields={FIELDS}", "--set", "output.history_every=10",
+         "--set", "output.history_interval=0.0"]
+
+
+def final(out):
+    with h5py.File(out / "snapshots.h5", "r") as f:
+        last = sorted(k for k in f if k.startswith("step_"))[-1]
+        return f[last].attrs["step"], {k: f[last][k][()] for k in ("position", "velocity", "J")}
+
+
+def history(out):
+    with h5py.File(out / "history.h5", "r") as f:
+        return {k: f[k][()] for k in f}
+
+
+def kill_processes_mentioning(marker: str) -> list:
+    """SIGKILL every process whose command line contains `marker`; wait until they are gone.
+    (MPICH's launcher puts each rank in a session of its own, so a process group kill misses
+    them.)"""
+    victims = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit() and int(entry) != os.getpid():
+            try:
+                with open(f"/proc/{entry}/cmdline", "rb") as fh:
+                    if marker.encode() in fh.read():
+                        os.kill(int(entry), signal.SIGKILL)
+                        victims.append(int(entry))
+            except (FileNotFoundError, ProcessLookupError, PermissionError):
+                continue
+    for pid in victims:
+        while os.path.exists(f"/proc/{pid}") and open(f"/proc/{pid}/stat").read().split()[2] != "Z":
+            time.sleep(0.05)
+    return victims
+
+
+def run(out, ranks, *extra, scene="patch_random", env=None):
+    proc = parsph(["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *extra],
+                  ranks=ranks, env=env)
+    assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("first, second, serial_hdf5", [(1, 1, False), (2, 2, False), (1, 3, False),
+                                                        (3, 2, False), (2, 2, True)])
+def test_restart_continues_bit_for_bit(tmp_path, first, second, serial_hdf5):
+    env = {"PARSPH_SERIAL_HDF5": "1"} if serial_hdf5 else None
+    straight = tmp_path / "straight"
+    run(straight, first, "--set", "time.max_steps=80", env=env)
+    split = tmp_path / "split"
+    run(split, first, "--set", "time.max_steps=40", "--set", "output.checkpoint_every=40", env=env)
+    assert (split / "checkpoints" / "step_00000040.h5").exists()
+    proc = run(split, second, "--set", "time.max_steps=80", "--restart", "latest", env=env)
+    assert "restarting from" in proc.stdout
+    step_a, a = final(straight)
+    step_b, b = final(split)
+    assert step_a == step_b == 80
+    for field in a:
+        assert np.array_equal(a[field], b[field]), field
+    ha, hb = history(straight), history(split)
+    assert np.array_equal(ha["step"], hb["step"])  # no gap, no duplicate row
+    assert np.array_equal(ha["time"], hb["time"])
+    scale = np.abs(ha["total_energy"]).max()
+    for name in ("kinetic_energy", "strain_energy", "total_energy", "disorder"):
+        assert np.allclose(ha[name], hb[name], rtol=0, atol=1e-12 * max(scale, np.abs(ha[name]).max()))
+
+
+def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
+    out = tmp_path / "run"
+    run(out, 1, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10")
+    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest",
+                   "--set", "material.density=2.0", "--set", "formulation.hourglass=10"])
+    assert proc.returncode == 2
+    assert "material.density" in proc.stderr and "formulation.hourglass" in proc.stderr
+    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+                   *PATCH, "--set", "time.end=0.2"])
+    assert proc.returncode == 0, proc.stderr
+    with h5py.File(out / "history.h5", "r") as f:
+        assert f["time"][-1] >= 0.2
+
+
+def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path):
+    out = tmp_path / "run"
+    run(out, 1, "--set", "time.max_steps=30", "--set", "output.checkpoint_every=10",
+        "--set", "output.checkpoint_keep=3")
+    folder = out / "checkpoints"
+    names = sorted(p.name for p in folder.glob("step_*.h5"))
+    assert names == ["step_00000010.h5", "step_00000020.h5", "step_00000030.h5"]
+    # flip bytes inside the velocity data of the newest, truncate the second newest
+    newest = folder / names[-1]
+    with h5py.File(newest, "r") as f:
+        offset = f["v"].id.get_offset()
+    data = bytearray(newest.read_bytes())
+    data[offset + 8: offset + 16] = b"\xff" * 8
+    newest.write_bytes(bytes(data))
+    middle = folder / names[-2]
+    middle.write_bytes(middle.read_bytes()[:2000])
+    for path, why in ((newest, "corrupted"), (middle, "cannot be opened")):
+        proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", path])
+        assert proc.returncode == 2 and why in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+                   *PATCH, "--set", "time.max_steps=40"])
+    assert proc.returncode == 0, proc.stderr
+    assert "skipping checkpoint" in proc.stdout
+    assert "step_00000010.h5" in proc.stdout.split("restarting from")[1].splitlines()[0]
+
+
+@pytest.mark.mpi
+def test_killed_run_leaves_readable_files_and_a_restartable_checkpoint(tmp_path):
+    out = tmp_path / "run"
+    cmd = [mpiexec(), "-n", "2", sys.executable, "-m", "parsph", "run", str(RUNS / "patch_random.toml"),
+           "--out", str(out), "--quiet", *PATCH, "--set", "output.checkpoint_every=200",
+           "--set", "output.snapshot_interval=0.5", "--set", "time.end=1000"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not list((out / "checkpoints").glob("step_*.h5")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(np.random.default_rng().uniform(0.5, 3.0))  # a random moment after a checkpoint
+    victims = kill_processes_mentioning(str(out))  # the ranks and the launcher, like an OOM kill
+    assert len(victims) >= 2
+    proc.wait(timeout=30)
+    with h5py.File(out / "history.h5", "r") as f:
+        assert len(f["time"]) > 0 and np.all(np.isfinite(f["kinetic_energy"][()]))
+    with h5py.File(out / "snapshots.h5", "r") as f:
+        assert any(k.startswith("step_") for k in f)
+    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+                   *PATCH, "--set", "time.end=1000", "--set", "time.max_steps=20"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_sigterm_writes_a_checkpoint_and_stops(tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "parsph", "run", str(RUNS / "patch_random.toml"), "--out", str(out),
+           "--quiet", *PATCH, "--set", "time.end=1000"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / "history.h5").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "stopped by SIGTERM" in stdout and "--restart latest" in stdout
+    assert list((out / "checkpoints").glob("step_*.h5"))
+
+
+def test_wall_clock_limit_checkpoints_and_exits_cleanly(tmp_path):
+    out = tmp_path / "run"
+    proc = run(out, 1, "--set", "time.wall_limit=1.0", "--set", "time.end=1000")
+    assert "stopped by the wall-clock limit" in proc.stdout
+    assert list((out / "checkpoints").glob("step_*.h5"))
+
+
+@pytest.mark.mpi
+def test_xdmf_of_a_three_rank_run_reads_back_with_meshio(tmp_path):
+    meshio = pytest.importorskip("meshio")
+    out = tmp_path / "run"
+    run(out, 3, "--set", "time.end=1.0", "--set", "output.snapshot_interval=0.25",
+        "--set", 'output.snapshot_fields=["position","displacement","velocity","J","rank"]')
+    with meshio.xdmf.TimeSeriesReader(str(out / "snapshots.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        assert points.shape == (444, 3) and cells[0].type == "vertex" and len(cells[0].data) == 444
+        assert reader.num_steps == 5
+        times = []
+        for k in range(reader.num_steps):
+            t, point_data, _ = reader.read_data(k)
+            times.append(t)
+            assert point_data["displacement"].shape == (444, 2)
+            assert point_data["velocity"].shape == (444, 2)
+            assert point_data["J"].shape == (444,)
+            assert sorted(np.unique(point_data["rank"])) == [0, 1, 2]
+        assert times == sorted(times) and times[-1] >= 1.0
