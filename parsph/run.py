@@ -98,26 +98,33 @@ class StopRequest:
 
 
 def _setup(scene_path, out_dir, overrides, overwrite, restart):
-    """The scene, output directory, reference body and checkpoint data of a run."""
+    """The scene, output directory, this rank's part of the particles and the checkpoint
+    data of a run. Rank 0 builds (or reads) the particle set and distributes it."""
     with collective():
         scene = config.load(scene_path, overrides)
     out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
     from parsph.build import Body, build_body
+    from parsph.parallel.decomposition import distribute
 
     if restart is None:
         previous = check_output(out_dir, overwrite)
+        body = None
         with collective():
-            body = build_body(scene)
-        return scene, out_dir, previous, body, None
+            if COMM.rank == 0:
+                body = build_body(scene)
+        return scene, out_dir, previous, distribute(body, COMM), None
     path = checkpoint.choose(restart, out_dir)
     data = checkpoint.load(path, COMM)
     with collective():
         checkpoint.check_compatible(data["scene"], scene, path)
-    groups = {name: data["groups"][:, k].astype(bool) for k, name in enumerate(data["group_names"])}
-    body = Body(X=data["X"], measure=data["measure"], volume=data["volume"], mass=data["mass"],
-                support=data["support"], groups=groups)
+    body, state = None, None
+    if COMM.rank == 0:
+        groups = {name: data["groups"][:, k].astype(bool) for k, name in enumerate(data["group_names"])}
+        body = Body(X=data["X"], measure=data["measure"], volume=data["volume"], mass=data["mass"],
+                    support=data["support"], groups=groups)
+        state = {"u": data["u"], "v": data["v"]}
     say(f"parsph: restarting from {path} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
-    return scene, out_dir, [], body, data
+    return scene, out_dir, [], distribute(body, COMM, state), data
 
 
 def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool,
@@ -129,7 +136,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     name = scene["scene"]["name"]
     scene_json = config.to_json(scene)
     start = time.perf_counter()
-    count = body.count
+    count = body.total
     sim = Simulation(scene, body, COMM, restart=data)
     del body
     setup_seconds = time.perf_counter() - start

@@ -17,22 +17,22 @@ from mpi4py import MPI
 
 from parsph import config
 from parsph.bc import BoundaryConditions, apply_initial_conditions
-from parsph.build import Body
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import ParsphError
 from parsph.formulations import tlsph
 from parsph.kernels.correction import reference_pairs
 from parsph.materials.elastic import MODEL_IDS
 from parsph.neighbors import find_pairs
-from parsph.parallel.decomposition import Decomposition
+from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.parallel.runtime import collective
 
 
 class Simulation:
     """Total-Lagrangian SPH state and stepping for the particles this rank owns."""
 
-    def __init__(self, scene: dict, body: Body, comm, restart: dict | None = None):
-        """Set up this rank's particles; `restart` (io.checkpoint.load) continues a run."""
+    def __init__(self, scene: dict, body: LocalBody, comm, restart: dict | None = None):
+        """Set up this rank's particles (parallel.decomposition.distribute); `restart`
+        (io.checkpoint.load, its particle state in body.extra) continues a run."""
         self.scene = scene
         self.comm = comm
         self.dim = dim = scene["scene"]["dimension"]
@@ -48,22 +48,17 @@ class Simulation:
 
         with collective(comm):
             self.decomp = Decomposition(body, comm)
-            local = self.decomp.local_gid
-            self.gid = local
-            self.n_owned = self.decomp.n_owned
-            self.X = np.ascontiguousarray(body.X[local])
-            self.mass = body.mass[local]
-            self.volume = body.volume[local]
-            self.measure = body.measure[local]
-            self.support = body.support[local]
+            local = self.gid = body.gid
+            self.n_owned = body.n_owned
+            self.X, self.mass, self.volume = body.X, body.mass, body.volume
+            self.measure, self.support = body.measure, body.support
             # rows for owned particles and for ghosts whose neighbourhood is complete
             rows = self.decomp.n_rows
             self.pairs = find_pairs(self.X, self.support, local, rows)
             self.ref = reference_pairs(self.X, self.measure, self.support, local, self.pairs,
                                        scene["kernel"]["type"])
         self._trim_to_owned()
-        own = self.gid[: self.n_owned]
-        self.groups = {name: mask[own] for name, mask in body.groups.items()}  # owned only
+        self.groups = {name: mask[: self.n_owned] for name, mask in body.groups.items()}  # owned only
         n_local = len(self.gid)
         self.u = np.zeros((n_local, dim))
         self.v = np.zeros((n_local, dim))
@@ -85,15 +80,14 @@ class Simulation:
         self.hourglass_energy_local = 0.0
         self.external_work_local = 0.0
         self._omega_hg2 = self._hourglass_frequencies()
-        own = self.gid[: self.n_owned]
         if restart is None:
             apply_initial_conditions(scene["initial"], self.groups, self.X[: self.n_owned],
                                      self.u[: self.n_owned], self.v[: self.n_owned])
             self.bcs.set_displacement(self.u[: self.n_owned], 0.0)
             self.bcs.set_velocity(self.v[: self.n_owned], 0.0)
         else:
-            self.u[: self.n_owned] = restart["u"][own]
-            self.v[: self.n_owned] = restart["v"][own]
+            self.u[: self.n_owned] = body.extra["u"][: self.n_owned]
+            self.v[: self.n_owned] = body.extra["v"][: self.n_owned]
             self.t, self.step_count = restart["clock"]["t"], restart["clock"]["step"]
             if comm.rank == 0:  # global totals, carried by rank 0
                 self.hourglass_energy_local = restart["totals"]["hourglass_work"]

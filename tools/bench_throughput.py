@@ -24,6 +24,7 @@ from mpi4py import MPI  # noqa: E402
 
 from parsph import config  # noqa: E402
 from parsph.build import build_body  # noqa: E402
+from parsph.parallel.decomposition import distribute  # noqa: E402
 from parsph.solver import Simulation  # noqa: E402
 
 
@@ -45,7 +46,7 @@ def block(dim: int, particles: int, alpha: float, form: str) -> dict:
 
 def measure(dim, particles, alpha, form, steps):
     scene = block(dim, particles, alpha, form)
-    sim = Simulation(scene, build_body(scene), MPI.COMM_WORLD)
+    sim = Simulation(scene, distribute(build_body(scene), MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
     for _ in range(5):

@@ -180,13 +180,15 @@ def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
 
 
 def load(path: str, comm) -> dict:
-    """Collective: the checkpoint's particle arrays (all rows, every rank) and attributes."""
-    with ParticleFile(path, "r", comm) as f:
-        data = {field: f.read_rows(field) for field in PARTICLE_FIELDS}
-        attrs = None
-        if f.writer:
-            attrs = {k: f.file.attrs[k] for k in ("scene", "groups", "clock", "totals", "schedules")}
-    attrs = comm.bcast(attrs if comm.rank == 0 else None, root=0)
+    """Collective: the checkpoint's attributes on every rank and its particle arrays (all
+    rows) on rank 0, which distributes them (parallel.decomposition.distribute)."""
+    data = {}
+    with collective(comm):
+        if comm.rank == 0:
+            with h5py.File(path, "r") as f:
+                data = {field: f[field][()] for field in PARTICLE_FIELDS}
+                data["attrs"] = {k: f.attrs[k] for k in ("scene", "groups", "clock", "totals", "schedules")}
+    attrs = comm.bcast(data.pop("attrs", None), root=0)
     data["scene"] = json.loads(attrs["scene"])
     data["group_names"] = json.loads(attrs["groups"])
     for key in ("clock", "totals", "schedules"):
