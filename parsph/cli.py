@@ -36,6 +36,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--restart", metavar="CHECKPOINT",
                    help="continue from a checkpoint file, or 'latest' (newest valid one in OUT/checkpoints)")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
+    r.add_argument("--debug", action="store_true",
+                   help="check at every history row that no particle is lost or duplicated")
     c = sub.add_parser("check", help="validate a scene and print it resolved, with defaults")
     c.add_argument("scene")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -88,7 +90,7 @@ def main(argv=None) -> int:
         if args.command == "run":
             from parsph.run import run
 
-            return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart)
+            return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart, args.debug)
         elif args.command == "check":
             import json
 

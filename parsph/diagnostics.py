@@ -83,3 +83,19 @@ def global_diagnostics(state) -> dict:
     for a, name in enumerate("xyz" if dim == 3 else ""):
         out[f"angular_momentum_{name}"] = ang[a]
     return out
+
+
+def check_particle_ids(state) -> None:
+    """Debug check (collective): the owned particles of all ranks are exactly the ids
+    0..N-1, each once. Compares the count, the sum and the sum of squares of the ids
+    (exact integer arithmetic) with those of 0..N-1."""
+    from parsph.errors import ParsphError
+
+    gid = state.gid[: state.n_owned].astype(object)
+    count, total, squares = (sum(x) for x in zip(*state.comm.allgather(
+        (len(gid), int(gid.sum()), int((gid * gid).sum())))))
+    n = state.decomp.total
+    expected = (n, n * (n - 1) // 2, (n - 1) * n * (2 * n - 1) // 6)
+    if (count, total, squares) != expected:
+        raise ParsphError(f"particles lost or duplicated at step {state.step_count}: ranks own {count} "
+                          f"particles, expected {n} (id sums {total}, {squares} vs {expected[1:]})")

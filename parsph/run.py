@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import config
+from parsph.diagnostics import check_particle_ids
 from parsph.errors import InputError
 from parsph.io import checkpoint
 from parsph.io.history import HistoryWriter
@@ -128,8 +129,9 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
 
 
 def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool,
-        restart: str | None = None) -> int:
-    """Run a scene (or continue it from a checkpoint); returns the exit code."""
+        restart: str | None = None, debug: bool = False) -> int:
+    """Run a scene (or continue it from a checkpoint); returns the exit code. `debug` checks
+    at every history row that no particle was lost or duplicated."""
     scene, out_dir, previous, body, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
     from parsph.solver import Simulation
 
@@ -163,6 +165,8 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     stop = StopRequest(scene["time"]["wall_limit"])
 
     def record():
+        if debug:
+            check_particle_ids(sim)
         values = sim.diagnostics()
         if history is not None:
             history.append(values)

@@ -43,7 +43,7 @@ def test_same_answer_on_every_rank_count(scene, tmp_path):
     results = {}
     for n in ranks:
         out = tmp_path / f"r{n}"
-        proc = parsph(["run", RUNS / f"{scene}.toml", "--out", out, "--quiet",
+        proc = parsph(["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", "--debug",
                        "--set", f"output.snapshot_fields={FIELDS}", *extra], ranks=n)
         assert proc.returncode == 0, proc.stderr
         results[n] = (final_state(out), history(out))
@@ -85,3 +85,20 @@ def test_neighbours_and_gradients_across_rank_boundaries(dim, ranks, cells):
                           capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "OK" in proc.stdout
+
+
+@pytest.mark.mpi
+def test_a_rank_without_particles_takes_part(tmp_path):
+    """3 particles on 4 ranks: one rank owns nothing; the answer is the single-rank one."""
+    args = ["run", RUNS / "bar1d.toml", "--quiet", "--debug", "--set", "geometry.parts.0.spacing=0.5",
+            "--set", "time.max_steps=50", "--set", f"output.snapshot_fields={FIELDS}"]
+    states = {}
+    for n in (1, 4):
+        out = tmp_path / f"r{n}"
+        proc = parsph([*args, "--out", out], ranks=n)
+        assert proc.returncode == 0, proc.stderr
+        states[n] = final_state(out)
+    assert len(states[1]["gid"]) == 3
+    assert len(np.unique(states[4]["rank"])) == 3  # one of the 4 ranks owns no particle
+    for field in ("position", "velocity"):
+        assert np.array_equal(states[1][field], states[4][field])

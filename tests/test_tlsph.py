@@ -176,3 +176,14 @@ body_acceleration = [0.0, -9.81]
     e = rows["total_energy"]
     assert rows["external_work"][-1] == pytest.approx(rows["kinetic_energy"][-1], rel=1e-9)
     assert np.abs(e - e[0]).max() < 1e-9 * rows["kinetic_energy"][-1]
+
+
+def test_debug_id_check_notices_a_lost_or_duplicated_particle():
+    from parsph.diagnostics import check_particle_ids
+    from parsph.errors import ParsphError
+
+    sim = simulation(block_2d())
+    check_particle_ids(sim)
+    sim.gid[0] = sim.gid[1]
+    with pytest.raises(ParsphError, match="lost or duplicated"):
+        check_particle_ids(sim)
