@@ -98,6 +98,17 @@ class StopRequest:
             signal.signal(sig, handler)
 
 
+def report_stages(seconds: dict, steps: int, particles: int) -> None:
+    """Time per stage of the step (the slowest rank's), in ms per step and per cent."""
+    names = sorted(COMM.allreduce(set(seconds), op=MPI.BOR) if COMM.size > 1 else seconds)
+    worst = np.array([seconds.get(k, 0.0) for k in names])
+    if COMM.size > 1:
+        COMM.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
+    total = worst.sum()
+    parts = ", ".join(f"{k} {1e3 * v / steps:.3g} ms ({100 * v / total:.0f} %)" for k, v in zip(names, worst))
+    say(f"parsph: per step: {parts}")
+
+
 def _setup(scene_path, out_dir, overrides, overwrite, restart):
     """The scene, output directory, this rank's part of the particles and the checkpoint
     data of a run. Rank 0 builds (or reads) the particle set and distributes it."""
@@ -165,11 +176,13 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     stop = StopRequest(scene["time"]["wall_limit"])
 
     def record():
+        start = time.perf_counter()
         if debug:
             check_particle_ids(sim)
         values = sim.diagnostics()
         if history is not None:
             history.append(values)
+        sim.stage_seconds["diagnostics+history"] += time.perf_counter() - start
         return values
 
     def save_checkpoint():
@@ -189,11 +202,13 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
             progress.update(sim.step_count, sim.t, dt)
             if history_due.due(sim.t, sim.step_count):
                 last = record()
+            output_start = time.perf_counter()
             if snapshot_due.due(sim.t, sim.step_count):
                 snapshots.write(sim, out["snapshot_fields"])
-            stopped = stop.check()
+            stopped = stop.check() if sim.step_count % 10 == 0 else 0
             if checkpoint_due.due(sim.t, sim.step_count) or stopped:
                 path = save_checkpoint()
+            sim.stage_seconds["snapshots+checkpoints"] += time.perf_counter() - output_start
             if stopped:
                 break
         # the final state is always in the history and in the snapshots
@@ -212,6 +227,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         say(f"parsph: {steps} steps to t = {sim.t:.6g} s in {loop_seconds:.2f} s: "
             f"{1e6 * loop_seconds * COMM.size / (steps * count):.3f} us per particle-step "
             f"(x {COMM.size} rank(s))")
+        report_stages(sim.stage_seconds, steps, count)
     if stopped:
         why = "the wall-clock limit" if stopped < 0 else signal.Signals(stopped).name
         say(f"parsph: stopped by {why} at step {sim.step_count}; checkpoint {path}; "

@@ -10,7 +10,9 @@ scene uses are compiled and run (formulations.tlsph).
 
 from __future__ import annotations
 
+import collections
 import math
+import time
 
 import numpy as np
 from mpi4py import MPI
@@ -45,6 +47,7 @@ class Simulation:
         self.pair_form = form["force_form"] == "pair"
         self._kinematics_stress, self._forces = tlsph.compile_stages(
             dim, self.model, self.pair_form, self.hourglass_form)
+        self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
 
         with collective(comm):
             self.decomp = Decomposition(body, comm)
@@ -154,10 +157,14 @@ class Simulation:
         """Stages of the force evaluation at the current u; sets self.acc (owned)."""
         n = self.n_owned
         lam, mu, bulk = self.constants.lam, self.constants.mu, self.constants.bulk
+        clock = time.perf_counter
+        t0 = clock()
         self.decomp.refresh(self.u)
+        t1 = clock()
         energy, hg_energy, bad = self._kinematics_stress(
             n, self.ptr, self.idx, self.g, self.dx, self.hgc, self.u, self.volume, self.youngs,
             lam, mu, bulk, self.F, self.VP, self.J, self.psi)
+        t2 = clock()
         if bad >= 0:
             x = self.X[bad] + self.u[bad]
             where = ", ".join(f"{c:.6g}" for c in x)
@@ -168,9 +175,15 @@ class Simulation:
         self.strain_energy_local = energy
         if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
             self.hourglass_energy_local = hg_energy
-        self.decomp.refresh(self.VP, *( (self.F,) if self.hourglass else ()))
+        self.decomp.refresh(self.VP, *((self.F,) if self.hourglass else ()))
+        t3 = clock()
         self._forces(n, self.ptr, self.idx, self.g, self.g_rev, self.g_sum, self.dx, self.hgc,
                      self.hreg, self.u, self.F, self.VP, self.youngs, self.f_int, self.f_hg)
+        t4 = clock()
+        stages = self.stage_seconds
+        stages["halo"] += (t1 - t0) + (t3 - t2)
+        stages["kinematics+stress"] += t2 - t1
+        stages["forces+hourglass" if self.hourglass else "forces"] += t4 - t3
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
@@ -201,6 +214,8 @@ class Simulation:
 
     def step(self) -> float:
         """Advance one time step; returns the step size used."""
+        start = time.perf_counter()
+        inside = sum(self.stage_seconds.values())
         n = self.n_owned
         dt = self._stable_dt
         u_old = self.u[:n].copy()
@@ -222,6 +237,8 @@ class Simulation:
         self.step_count += 1
         if self.scene["time"]["dt"] == 0 and self.model != 0:
             self._stable_dt = self._stable_time_step()
+        self.stage_seconds["integration"] += (time.perf_counter() - start
+                                              - (sum(self.stage_seconds.values()) - inside))
         return dt
 
     @property
