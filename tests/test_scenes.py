@@ -48,11 +48,11 @@ def test_random_patch_disorders_without_hourglass_control():
 @pytest.mark.slow
 def test_random_patch_stays_coherent_for_100_periods_with_hourglass_control():
     # breathing period ~1.55 s: 160 s is about 100 periods
-    sim = simulation("patch_random", ["time.cfl=0.6"])
+    sim = simulation("patch_random")
     rows = run_until(sim, 160.0, every=100)
     assert rows["disorder"].max() < 0.1  # measured 0.075; alpha = 0 reaches ~1
     e = rows["total_energy"]
-    assert np.abs(e - e[0]).max() < 3e-3 * e[0]
+    assert np.abs(e - e[0]).max() < 5e-3 * e[0]  # measured 2.6e-3
     # still vibrating strongly (no energy was lost to anything but the elastic modes)
     late = rows["time"] > 140
     assert rows["kinetic_energy"][late].max() > 0.3 * e[0]
