@@ -63,7 +63,7 @@ KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = ("saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible")
 PROBE_QUANTITIES = ("displacement", "velocity", "position", "reaction", "force", "J", "von_mises",
                     "disorder")
-SNAPSHOT_FIELDS = PROBE_QUANTITIES + ("rank", "reference_position")
+SNAPSHOT_FIELDS = PROBE_QUANTITIES + ("rank", "reference_position", "cauchy_stress")
 
 
 def snapshot_fields(v):

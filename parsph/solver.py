@@ -281,6 +281,8 @@ class Simulation:
             return self.J[sel]
         if name == "von_mises":
             return self.von_mises(sel)
+        if name == "cauchy_stress":
+            return self.cauchy_stress(sel)
         if name == "disorder":
             return self.disorder()[sel]
         raise ValueError(name)

@@ -28,7 +28,7 @@ def parsph(args, ranks: int = 1, timeout: float = 300, cwd=None, env=None) -> su
     cmd = [sys.executable, "-m", "parsph", *map(str, args)]
     if ranks > 1:
         cmd = [mpiexec(), "-n", str(ranks), *cmd]
-    env = dict(os.environ, PYTHONUNBUFFERED="1", **(env or {}))
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
 
 

@@ -123,13 +123,15 @@ def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp
 
 
 @pytest.mark.mpi
-def test_killed_run_leaves_readable_files_and_a_restartable_checkpoint(tmp_path):
+@pytest.mark.parametrize("serial_hdf5", [False, True])
+def test_killed_run_leaves_readable_files_and_a_restartable_checkpoint(tmp_path, serial_hdf5):
     out = tmp_path / "run"
+    env = dict(os.environ, PARSPH_SERIAL_HDF5="1" if serial_hdf5 else "0")
     cmd = [mpiexec(), "-n", "2", sys.executable, "-m", "parsph", "run", str(RUNS / "patch_random.toml"),
            "--out", str(out), "--quiet", *PATCH, "--set", "output.checkpoint_every=200",
            "--set", "output.snapshot_interval=0.5", "--set", "time.end=1000"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
+                            start_new_session=True, env=env)
     deadline = time.monotonic() + 120
     while not list((out / "checkpoints").glob("step_*.h5")) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -142,7 +144,7 @@ def test_killed_run_leaves_readable_files_and_a_restartable_checkpoint(tmp_path)
     with h5py.File(out / "snapshots.h5", "r") as f:
         assert any(k.startswith("step_") for k in f)
     proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.end=1000", "--set", "time.max_steps=20"], ranks=2)
+                   *PATCH, "--set", "time.end=1000", "--set", "time.max_steps=20"], ranks=2, env=env)
     assert proc.returncode == 0, proc.stderr
 
 
@@ -170,11 +172,14 @@ def test_wall_clock_limit_checkpoints_and_exits_cleanly(tmp_path):
 
 
 @pytest.mark.mpi
-def test_xdmf_of_a_three_rank_run_reads_back_with_meshio(tmp_path):
+@pytest.mark.parametrize("serial_hdf5", [False, True])
+def test_xdmf_of_a_three_rank_run_reads_back_with_meshio(tmp_path, serial_hdf5):
     meshio = pytest.importorskip("meshio")
     out = tmp_path / "run"
-    run(out, 3, "--set", "time.end=1.0", "--set", "output.snapshot_interval=0.25",
-        "--set", 'output.snapshot_fields=["position","displacement","velocity","J","rank"]')
+    proc = run(out, 3, "--set", "time.end=1.0", "--set", "output.snapshot_interval=0.25",
+               "--set", 'output.snapshot_fields=["position","displacement","velocity","J","rank","cauchy_stress"]',
+               env={"PARSPH_SERIAL_HDF5": "1" if serial_hdf5 else "0"})
+    assert ("written there" in proc.stderr) == serial_hdf5  # the fallback says so
     with meshio.xdmf.TimeSeriesReader(str(out / "snapshots.xdmf")) as reader:
         points, cells = reader.read_points_cells()
         assert points.shape == (444, 3) and cells[0].type == "vertex" and len(cells[0].data) == 444
@@ -186,5 +191,6 @@ def test_xdmf_of_a_three_rank_run_reads_back_with_meshio(tmp_path):
             assert point_data["displacement"].shape == (444, 2)
             assert point_data["velocity"].shape == (444, 2)
             assert point_data["J"].shape == (444,)
+            assert point_data["cauchy_stress"].shape == (444, 2, 2)
             assert sorted(np.unique(point_data["rank"])) == [0, 1, 2]
         assert times == sorted(times) and times[-1] >= 1.0
