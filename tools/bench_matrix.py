@@ -1,0 +1,201 @@
+#!/usr/bin/env python3
+"""Accuracy per second: formulation x stabilisation x resolution on problems with an answer.
+
+Problems: the beam of [G §4.2] (compliance against Euler-Bernoulli, C = 53657 N/m) and the
+1D bar of [V §3.3.1] (tip displacement over two periods against the Fourier series).
+Variants: total-Lagrangian SPH with alpha = 0, alpha = 50 (paper form) and alpha = 50
+(variational form). For every case it records the error, the wall time of the time loop
+(set-up and compilation excluded), microseconds per particle-step and the bytes of solver
+arrays per particle; it fits convergence rates and writes a table (CSV, JSON) and plots:
+error against wall time (work-precision), error against resolution, throughput.
+
+The `stress` preset runs stability stress tests instead: the random patch for 1000
+periods, a block spinning at high speed, the rubber strip pulled to 500 %, recording
+whether and when a run fails and how its disorder and hourglass energy grow.
+
+usage: tools/bench_matrix.py [--preset quick|full|stress] [--out results/bench_matrix]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+
+from physics import simulation  # noqa: E402
+
+from parsph.analytic import bar_tip_displacement, cantilever_stiffness  # noqa: E402
+from parsph.errors import ParsphError  # noqa: E402
+
+VARIANTS = {"TL a=0": (0.0, "paper"), "TL a=50 paper": (50.0, "paper"),
+            "TL a=50 variational": (50.0, "variational")}
+PRESETS = {"quick": {"beam": (4, 8), "bar": (40, 80, 160)},
+           "full": {"beam": (4, 8, 16, 32), "bar": (40, 80, 160, 320, 640)}}
+
+
+def solver_bytes(sim) -> int:
+    return sum(v.nbytes for v in vars(sim).values() if isinstance(v, np.ndarray))
+
+
+def timed_run(sim, end, probe=None, every=1):
+    values, times = [], []
+    start = time.perf_counter()
+    while sim.t < end * (1 - 1e-12):
+        sim.step()
+        if probe is not None and sim.step_count % every == 0:
+            values.append(probe(sim))
+            times.append(sim.t)
+    return time.perf_counter() - start, np.array(times), np.array(values)
+
+
+def beam_case(n, alpha, form):
+    sim = simulation("beam_bending", [f"parameters.n={n}", f"formulation.hourglass={alpha}",
+                                      f'formulation.hourglass_form="{form}"'])
+    seconds, _, _ = timed_run(sim, sim.scene["time"]["end"])
+    reaction = -sim.reaction()[sim.group_index("tip"), 1].sum() / 1e-4
+    exact = cantilever_stiffness(100e9, 0.3, 8e-3, 1e-3, 1e-3)
+    return sim, seconds, abs(reaction / exact - 1), n
+
+
+def bar_case(particles, alpha, form):
+    sim = simulation("bar1d", [f"geometry.parts.0.spacing={1.0 / (particles - 1)!r}",
+                               f"formulation.hourglass={alpha}", f'formulation.hourglass_form="{form}"'])
+    tip = int(np.argmax(sim.X[:, 0]))
+    c = np.sqrt(200e9 / 7850)
+    seconds, t, u = timed_run(sim, 8.0 / c, probe=lambda s: s.u[tip, 0], every=5)
+    exact = bar_tip_displacement(t, 1.0, c, 5.0)
+    return sim, seconds, np.linalg.norm(u - exact) / np.linalg.norm(exact), particles
+
+
+def accuracy(preset: str, out: str) -> None:
+    rows = []
+    for problem, maker in (("beam", beam_case), ("bar", bar_case)):
+        for variant, (alpha, form) in VARIANTS.items():
+            if problem == "bar" and alpha > 0:
+                continue  # no hourglass modes to control in 1D
+            for resolution in PRESETS[preset][problem]:
+                sim, seconds, error, res = maker(resolution, alpha, form)
+                n = sim.n_owned
+                rows.append({"problem": problem, "variant": variant, "resolution": res, "particles": n,
+                             "steps": sim.step_count, "error": error, "seconds": seconds,
+                             "us_per_particle_step": 1e6 * seconds / (n * sim.step_count),
+                             "bytes_per_particle": solver_bytes(sim) / n})
+                r = rows[-1]
+                print(f"{problem:5s} {variant:20s} res {res:4d}  N {n:6d}  error {error:.3e}  "
+                      f"{seconds:7.2f} s  {r['us_per_particle_step']:.3f} us/p-step  "
+                      f"{r['bytes_per_particle']:.0f} B/particle", flush=True)
+    rates = {}
+    for problem in ("beam", "bar"):
+        for variant in VARIANTS:
+            sel = [r for r in rows if r["problem"] == problem and r["variant"] == variant]
+            if len(sel) >= 2:
+                x = np.log([r["resolution"] for r in sel])
+                y = np.log([r["error"] for r in sel])
+                rates[f"{problem} {variant}"] = float(np.polyfit(x, y, 1)[0])
+    print("fitted convergence rates (slope of log error vs log resolution):")
+    for k, v in rates.items():
+        print(f"  {k:28s} {v:6.2f}")
+    write(rows, {"rates": rates}, out)
+    plot(rows, out)
+
+
+def stress(out: str) -> None:
+    cases = [
+        ("patch alpha=0, 1000 periods", "patch_random", ["formulation.hourglass=0"], 1550.0),
+        ("patch alpha=50 variational, 1000 periods", "patch_random", [], 1550.0),
+        ("patch alpha=50 paper, 1000 periods", "patch_random", ['formulation.hourglass_form="paper"'], 1550.0),
+        ("rubber pull to 500 %, coarse", "rubber_pull", ["parameters.l0=1.3333333333333333e-4"], 5.0e-4),
+    ]
+    spin = ("spin at 0.3 x wave speed, 50 turns", "patch_random",
+            ["formulation.hourglass=50", "time.end=1.0"], None)
+    rows = []
+    for name, scene, overrides, end in cases + [spin]:
+        sim = simulation(scene, overrides)
+        if end is None:  # rigid spin: surface speed 0.3 c about the centre
+            omega = 0.3 * sim.constants.wave_speed / 0.5
+            rel = sim.X[: sim.n_owned] - 0.5
+            sim.u[:] = 0.0
+            sim.v[: sim.n_owned] = omega * np.stack([-rel[:, 1], rel[:, 0]], axis=1)
+            sim.compute_forces()
+            end = 50 * 2 * np.pi / omega
+        e0 = sim.diagnostics()["total_energy"]
+        worst, failed, start = 0.0, None, time.perf_counter()
+        samples = []
+        try:
+            while sim.t < end:
+                sim.step()
+                if sim.step_count % 200 == 0:
+                    d = sim.diagnostics()
+                    worst = max(worst, d["disorder"])
+                    samples.append((sim.t, d["disorder"], d["hourglass_energy"], d["total_energy"]))
+        except ParsphError as exc:
+            failed = f"t = {sim.t:.4g}: {str(exc)[:60]}"
+        last = samples[-1] if samples else (0, 0, 0, e0)
+        rows.append({"case": name, "end": end, "reached": sim.t, "failed": failed or "", "max_disorder": worst,
+                     "final_hourglass_energy": last[2] / e0, "energy_change": last[3] / e0 - 1,
+                     "seconds": time.perf_counter() - start})
+        r = rows[-1]
+        print(f"{name:42s} {'FAILED ' + failed if failed else 'ok':10s} max disorder {worst:8.3g}  "
+              f"hourglass energy {r['final_hourglass_energy']:8.2e} E0  energy change {r['energy_change']:+.2e}  "
+              f"{r['seconds']:.0f} s", flush=True)
+    write(rows, {}, out)
+
+
+def write(rows, extra, out):
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, "table.csv"), "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    with open(os.path.join(out, "table.json"), "w") as fh:
+        json.dump({"rows": rows, **extra}, fh, indent=2)
+
+
+def plot(rows, out):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    for problem, marker in (("beam", "o"), ("bar", "s")):
+        for variant in VARIANTS:
+            sel = [r for r in rows if r["problem"] == problem and r["variant"] == variant]
+            if not sel:
+                continue
+            label = f"{problem}, {variant}"
+            axes[0].loglog([r["seconds"] for r in sel], [r["error"] for r in sel], marker=marker, label=label)
+            axes[1].loglog([r["resolution"] for r in sel], [r["error"] for r in sel], marker=marker, label=label)
+            axes[2].semilogx([r["particles"] for r in sel], [r["us_per_particle_step"] for r in sel],
+                             marker=marker, label=label)
+    axes[0].set(xlabel="wall time of the time loop [s]", ylabel="relative error", title="work-precision")
+    axes[1].set(xlabel="resolution (beam: n, bar: particles)", ylabel="relative error", title="convergence")
+    axes[2].set(xlabel="particles", ylabel="µs per particle-step", title="throughput (1 core)")
+    for ax in axes:
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "work_precision.png"), dpi=110)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", choices=("quick", "full", "stress"), default="quick")
+    ap.add_argument("--out", default="results/bench_matrix")
+    args = ap.parse_args()
+    if args.preset == "stress":
+        stress(os.path.join(args.out, "stress"))
+    else:
+        accuracy(args.preset, os.path.join(args.out, args.preset))
+
+
+if __name__ == "__main__":
+    main()
