@@ -123,8 +123,8 @@ class Simulation:
         self.hgc, self.hreg = np.zeros(0), np.zeros(0)
         if self.hourglass:
             self.hgc, self.hreg = tlsph.hourglass_coefficients(
-                self.hourglass_form, self.pairs.row_of_pair()[:end], self.idx, self.dx, ref.w[:end],
-                ref.h[:end], self.volume, self.volume / self._out_of_plane(), self.alpha)
+                self.hourglass_form, self.pairs.row_of_pair()[:end], self.idx, self.dx, self.w,
+                ref.h[:end], self.volume, self.measure, self.alpha)
         self.min_spacing = np.sqrt(np.minimum.reduceat(
             np.einsum("pa,pa->p", self.dx, self.dx), ptr[:-1])) if end else np.full(n, np.inf)
         del self.ref, self.pairs
@@ -139,18 +139,14 @@ class Simulation:
         k = self.hgc * (self.youngs[rows] + self.youngs[self.idx])
         return 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
 
-    def _out_of_plane(self) -> float:
-        geo = self.scene["geometry"]
-        return {1: geo["area"], 2: geo["thickness"], 3: 1.0}[self.dim]
-
     def _stable_time_step(self) -> float:
         """CFL step (formulations.tlsph.stable_time_step) reduced over ranks, or the fixed dt."""
-        time = self.scene["time"]
-        if time["dt"] > 0:
-            return time["dt"]
+        settings = self.scene["time"]
+        if settings["dt"] > 0:
+            return settings["dt"]
         local = tlsph.stable_time_step(self.n_owned, self.J, self.min_spacing, self._omega_hg2,
                                        self.constants.wave_speed, self.dim)
-        return time["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
+        return settings["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self) -> None:
