@@ -144,8 +144,8 @@ class Simulation:
         settings = self.scene["time"]
         if settings["dt"] > 0:
             return settings["dt"]
-        local = tlsph.stable_time_step(self.n_owned, self.J, self.min_spacing, self._omega_hg2,
-                                       self.constants.wave_speed, self.dim)
+        local = tlsph.stable_time_step(self.n_owned, self.F, self.J, self.min_spacing, self._omega_hg2,
+                                       self.constants.wave_speed, self.model, self.dim)
         return settings["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
 
     # ----------------------------------------------------------------- the step
@@ -231,7 +231,7 @@ class Simulation:
             self.hourglass_energy_local -= 0.5 * np.sum((f_hg_old + self.f_hg) * du)
         self.external_work_local += 0.5 * np.sum((f_ext_old + self.external_force()) * du)
         self.step_count += 1
-        if self.scene["time"]["dt"] == 0 and self.model != 0:
+        if self.scene["time"]["dt"] == 0:
             self._stable_dt = self._stable_time_step()
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))

@@ -34,11 +34,12 @@ def simulation(name_or_text: str, overrides=(), comm=MPI.COMM_SELF) -> Simulatio
 
 
 def run_until(sim: Simulation, end: float, every: int = 1, probe=None) -> dict:
-    """Step to `end`; returns lists of diagnostics (and `probe(sim)`) every `every` steps."""
+    """Step to `end`; returns arrays of diagnostics (and `probe(sim)`) every `every` steps
+    and at the end."""
     rows = [dict(sim.diagnostics(), probe=probe(sim) if probe else None)]
     while sim.t < end * (1 - 1e-12):
         sim.step()
-        if sim.step_count % every == 0:
+        if sim.step_count % every == 0 or sim.t >= end * (1 - 1e-12):
             rows.append(dict(sim.diagnostics(), probe=probe(sim) if probe else None))
     return {k: np.array([r[k] for r in rows]) for k in rows[0]}
 

@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from parsph.materials import elastic
-from parsph.materials.elastic import det, stress
+from parsph.materials.elastic import SAINT_VENANT_KIRCHHOFF, det, stress
 
 
 def _source_hash() -> str:
@@ -237,13 +237,52 @@ def hourglass_error(n, ptr, idx, dx, w, u, F, out):
 
 
 @njit(cache=True)
-def stable_time_step(n, J, min_spacing, omega_hg2, wave_speed, dim):
+def principal_stretches(F, dim):
+    """(smallest, largest) principal stretch of F: square roots of the extreme eigenvalues
+    of C = F^T F (closed form for a symmetric 2x2 or 3x3 matrix)."""
+    if dim == 1:
+        s = abs(F[0, 0])
+        return s, s
+    C = np.empty((3, 3))
+    for a in range(dim):
+        for b in range(dim):
+            c = 0.0
+            for k in range(dim):
+                c += F[k, a] * F[k, b]
+            C[a, b] = c
+    if dim == 2:
+        half = 0.5 * (C[0, 0] + C[1, 1])
+        root = math.sqrt(max(half * half - (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]), 0.0))
+        return math.sqrt(max(half - root, 0.0)), math.sqrt(half + root)
+    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
+    off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
+    p = math.sqrt(((C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
+    if p < 1e-300:
+        return math.sqrt(q), math.sqrt(q)
+    for a in range(3):
+        C[a, a] -= q
+    r = max(-1.0, min(1.0, det(C, 3) / (2.0 * p ** 3)))
+    phi = math.acos(r) / 3.0
+    largest = q + 2.0 * p * math.cos(phi)
+    smallest = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    return math.sqrt(max(smallest, 0.0)), math.sqrt(max(largest, 0.0))
+
+
+@njit(cache=True)
+def stable_time_step(n, F, J, min_spacing, omega_hg2, wave_speed, model, dim):
     """Largest stable step of the owned particles before the CFL factor:
-    dt_i = 2 / sqrt(omega_el^2 + omega_hg^2), omega_el = 2 c / (l_i min(1, J_i)^(1/d)),
-    l_i the nearest reference neighbour distance (compression shortens it)."""
+        dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
+    l_i the nearest reference neighbour distance, s_min the smallest principal stretch
+    (the current spacing shrinks with it), and c_i the reference P-wave speed times the
+    law's stiffening: (3 s_max^2 - 1)/2 under stretch for Saint Venant-Kirchhoff,
+    1 - ln J under compression for the neo-Hookean laws (their tangent moduli)."""
     dt = np.inf
     for i in range(n):
-        scale = min(1.0, J[i]) ** (1.0 / dim) if J[i] > 0 else 0.0
-        w_el = 2.0 * wave_speed / (min_spacing[i] * scale)
+        s_min, s_max = principal_stretches(F[i], dim)
+        if model == SAINT_VENANT_KIRCHHOFF:
+            stiffening = max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
+        else:
+            stiffening = max(1.0, 1.0 - math.log(J[i])) if J[i] > 0 else np.inf
+        w_el = 2.0 * wave_speed * math.sqrt(stiffening) / (min_spacing[i] * min(1.0, s_min))
         dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
     return dt
