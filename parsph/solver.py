@@ -146,7 +146,15 @@ class Simulation:
             return settings["dt"]
         local = tlsph.stable_time_step(self.n_owned, self.F, self.J, self.min_spacing, self._omega_hg2,
                                        self.constants.wave_speed, self.model, self.dim)
-        return settings["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
+        dt = settings["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
+        if not dt > 0.0:
+            error = ParsphError(
+                f"the stable time step collapsed to zero at step {self.step_count}, t = {self.t:.6g}: "
+                "a particle is flattened (a principal stretch near zero); the run is unstable: raise "
+                "formulation.hourglass or refine the particles")
+            error.agreed = True  # every rank has the same reduced dt and raises this
+            raise error
+        return dt
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self) -> None:

@@ -187,3 +187,13 @@ def test_debug_id_check_notices_a_lost_or_duplicated_particle():
     sim.gid[0] = sim.gid[1]
     with pytest.raises(ParsphError, match="lost or duplicated"):
         check_particle_ids(sim)
+
+
+def test_flattened_particle_stops_the_run_with_a_clear_message():
+    from parsph.errors import ParsphError
+
+    sim = simulation(block_2d(model="neo_hookean"))
+    sim.F[:] = np.eye(2)
+    sim.F[3] = np.diag([1.0, 0.0])  # squashed flat in y: no stable step exists
+    with pytest.raises(ParsphError, match="time step collapsed"):
+        sim._stable_time_step()

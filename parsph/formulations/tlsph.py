@@ -283,6 +283,9 @@ def stable_time_step(n, F, J, min_spacing, omega_hg2, wave_speed, model, dim):
             stiffening = max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
         else:
             stiffening = max(1.0, 1.0 - math.log(J[i])) if J[i] > 0 else np.inf
-        w_el = 2.0 * wave_speed * math.sqrt(stiffening) / (min_spacing[i] * min(1.0, s_min))
+        length = min_spacing[i] * min(1.0, s_min)
+        if not (length > 0.0 and stiffening < np.inf):
+            return 0.0  # a flattened or inverted particle: no stable step
+        w_el = 2.0 * wave_speed * math.sqrt(stiffening) / length
         dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
     return dt
