@@ -13,6 +13,65 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "runs"
 
+# A copy of runs/bar1d.toml without the comments: 40 particles on the nodes of [0, 1] m.
+BAR = """\
+[scene]
+name = "bar1d"
+dimension = 1
+
+[geometry]
+area = 1.0e-4
+[[geometry.parts]]
+shape = "box"
+lower = [0.0]
+upper = [1.0]
+spacing = 0.02564102564102564
+placement = "node"
+
+[kernel]
+type = "cubic_spline"
+support = 2.1
+
+[material]
+model = "saint_venant_kirchhoff"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.0
+
+[formulation]
+type = "tlsph"
+hourglass = 0.0
+
+[time]
+end = 3.2e-3
+cfl = 0.5
+
+[groups.A]
+nearest = [0.0]
+[groups.B]
+nearest = [1.0]
+[groups.right_quarter]
+box = { lower = [0.75], upper = [1.0] }
+
+[[initial]]
+type = "velocity"
+group = "right_quarter"
+value = [5.0]
+
+[[bc]]
+type = "fixed"
+group = "A"
+
+[[probes]]
+name = "tip_displacement"
+group = "B"
+quantity = "displacement"
+component = 0
+
+[output]
+history_interval = 1.0e-5
+"""
+
 
 def mpiexec() -> str:
     """The launcher of the MPI that mpi4py was built against (MPICH on Debian)."""

@@ -197,3 +197,17 @@ def test_flattened_particle_stops_the_run_with_a_clear_message():
     sim.F[3] = np.diag([1.0, 0.0])  # squashed flat in y: no stable step exists
     with pytest.raises(ParsphError, match="time step collapsed"):
         sim._stable_time_step()
+
+
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_principal_stretches_match_the_singular_values_of_F(dim):
+    from parsph.formulations.tlsph import principal_stretches
+
+    rng = np.random.default_rng(dim)
+    for _ in range(100):
+        F = np.eye(dim) + 0.8 * rng.standard_normal((dim, dim))
+        sv = np.linalg.svd(F, compute_uv=False)
+        smallest, largest = principal_stretches(F, dim)
+        assert smallest == pytest.approx(sv.min(), abs=1e-7 * sv.max())
+        assert largest == pytest.approx(sv.max(), rel=1e-7)
+    assert principal_stretches(np.eye(dim), dim) == pytest.approx((1.0, 1.0))

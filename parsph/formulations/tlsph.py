@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from parsph.materials import elastic
-from parsph.materials.elastic import SAINT_VENANT_KIRCHHOFF, det, stress
+from parsph.materials.elastic import SAINT_VENANT_KIRCHHOFF, det, right_cauchy_green, stress
 
 
 def _source_hash() -> str:
@@ -244,12 +244,7 @@ def principal_stretches(F, dim):
         s = abs(F[0, 0])
         return s, s
     C = np.empty((3, 3))
-    for a in range(dim):
-        for b in range(dim):
-            c = 0.0
-            for k in range(dim):
-                c += F[k, a] * F[k, b]
-            C[a, b] = c
+    right_cauchy_green(F, dim, C)
     if dim == 2:
         half = 0.5 * (C[0, 0] + C[1, 1])
         root = math.sqrt(max(half * half - (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]), 0.0))
