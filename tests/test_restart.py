@@ -35,8 +35,9 @@ def kill_processes_mentioning(marker: str) -> list:
     (MPICH's launcher puts each rank in a session of its own, so a process group kill misses
     them.)"""
     victims = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit() and int(entry) != os.getpid():
+    # newest first: the ranks die before the launcher could end them in an orderly way
+    for entry in sorted((e for e in os.listdir("/proc") if e.isdigit()), key=int, reverse=True):
+        if int(entry) != os.getpid():
             try:
                 with open(f"/proc/{entry}/cmdline", "rb") as fh:
                     if marker.encode() in fh.read():
@@ -44,10 +45,21 @@ def kill_processes_mentioning(marker: str) -> list:
                         victims.append(int(entry))
             except (FileNotFoundError, ProcessLookupError, PermissionError):
                 continue
-    for pid in victims:
-        while os.path.exists(f"/proc/{pid}") and open(f"/proc/{pid}/stat").read().split()[2] != "Z":
+    for pid in victims:  # until every thread has exited: only then are its files closed
+        while any(state != "Z" for state in _thread_states(pid)):
             time.sleep(0.05)
     return victims
+
+
+def _thread_states(pid: int) -> list:
+    states = []
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/stat") as fh:
+                states.append(fh.read().rsplit(")", 1)[1].split()[0])
+    except (FileNotFoundError, ProcessLookupError):
+        pass
+    return states
 
 
 def run(out, ranks, *extra, scene="patch_random", env=None):
