@@ -76,15 +76,6 @@ class ParticleFile:
                 data[g] = r
             self.file.create_dataset(name, data=data)
 
-    def read_rows(self, name: str, gid: np.ndarray | None = None) -> np.ndarray:
-        """Rows `gid` of dataset `name` on every rank (all rows if gid is None)."""
-        if self.collective:
-            dset = self.file[name]
-            return dset[()] if gid is None else dset[np.asarray(gid)]
-        data = self.file[name][()] if self.comm.rank == 0 else None
-        data = self.comm.bcast(data, root=0)
-        return data if gid is None else data[gid]
-
 
 def runs(gid: np.ndarray):
     """(start, count) of each run of consecutive values in a sorted id array."""
