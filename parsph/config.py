@@ -15,7 +15,7 @@ import operator
 import json
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 from parsph.errors import InputError
@@ -538,7 +538,6 @@ class Derived:
     bulk: float
     youngs: float
     wave_speed: float
-    extra: dict = field(default_factory=dict)
 
 
 def material_constants(material: dict) -> Derived:

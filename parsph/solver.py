@@ -96,6 +96,7 @@ class Simulation:
                 self.hourglass_energy_local = restart["totals"]["hourglass_work"]
                 self.external_work_local = restart["totals"]["external_work"]
         self.compute_forces()
+        self._external = self.external_force()  # at the current state, for the work integral
         self._stable_dt = restart["clock"]["dt"] if restart else self._stable_time_step()
 
     # ----------------------------------------------------------------- set-up helpers
@@ -224,7 +225,7 @@ class Simulation:
         dt = self._stable_dt
         u_old = self.u[:n].copy()
         f_hg_old = self.f_hg.copy()
-        f_ext_old = self.external_force()
+        f_ext_old = self._external
         self._kick(0.5 * dt)
         self.bcs.set_velocity(self.v[:n], self.t + 0.5 * dt)
         self.u[:n] += dt * self.v[:n]
@@ -237,7 +238,8 @@ class Simulation:
         if self.hourglass_form == tlsph.HOURGLASS_PAPER:
             # not a potential force: its energy is the work it has absorbed
             self.hourglass_energy_local -= 0.5 * np.sum((f_hg_old + self.f_hg) * du)
-        self.external_work_local += 0.5 * np.sum((f_ext_old + self.external_force()) * du)
+        self._external = self.external_force()
+        self.external_work_local += 0.5 * np.sum((f_ext_old + self._external) * du)
         self.step_count += 1
         if self.scene["time"]["dt"] == 0:
             self._stable_dt = self._stable_time_step()
