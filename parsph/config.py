@@ -100,7 +100,13 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "bulk_modulus": Key("float", None, positive, "[Pa]"),
     },
     "formulation": {
-        "type": Key("str", "tlsph", one_of("tlsph")),
+        "type": Key("str", "tlsph", one_of("tlsph", "ulsph"),
+                    "tlsph: total-Lagrangian; ulsph: updated reference [V §3.1]"),
+        "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
+        "update_every": Key("int", 0, non_negative, "ulsph: update the reference every N steps (0 = off)"),
+        "update_strain": Key("float", 0.0, non_negative,
+                             "ulsph: update when the largest principal log strain since the reference "
+                             "exceeds this (0 = off)"),
         "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
         "hourglass": Key("float", 50.0, non_negative, "hourglass coefficient alpha [G eq. 31]"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
@@ -114,6 +120,11 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "max_steps": Key("int", 0, non_negative, "stop after this many steps (0 = no limit)"),
         "wall_limit": Key("float", 0.0, non_negative,
                           "wall-clock seconds after which the run checkpoints and stops (0 = none)"),
+    },
+    "parallel": {
+        "rebalance": Key("float", 0.0, non_negative,
+                         "at a reference update, re-decide ownership when the busiest rank's work "
+                         "exceeds the mean by this fraction (0 = at every update)"),
     },
     "loads": {
         "body_acceleration": Key("vector", None, doc="uniform body force per unit mass [m/s^2]"),
@@ -463,6 +474,12 @@ def validate(raw: dict) -> dict:
     scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
     _validate_material(scene["material"], dim)
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
+    form = scene["formulation"]
+    if form["type"] == "ulsph" and not (form["update_every"] or form["update_strain"]):
+        raise InputError("formulation.type = 'ulsph' needs an update trigger: formulation.update_every "
+                         "(steps) or formulation.update_strain (log strain)")
+    if form["type"] == "tlsph" and (form["update_every"] or form["update_strain"]):
+        raise InputError("formulation.update_every/update_strain apply to formulation.type = 'ulsph' only")
     scene["groups"] = _validate_groups(raw.get("groups"), dim)
     _validate_lists(scene, raw, dim)
     scene["parameters"] = dict(raw.get("parameters", {}))

@@ -60,7 +60,8 @@ def global_diagnostics(state) -> dict:
     eta = state.disorder()
     local = np.concatenate([
         [np.sum(m[:, 0] * eta * eta), np.sum(m)],
-        [0.5 * np.sum(m * v * v), state.strain_energy_local, state.hourglass_energy_local,
+        [0.5 * np.sum(m * v * v), state.strain_energy_local,
+         state.hourglass_energy_local + state.hourglass_released_local,
          state.external_work_local],
         p.sum(axis=0), angular_momentum(x, p),
     ])

@@ -2,10 +2,14 @@
 
 A step is velocity-Verlet (kick-drift-kick leap-frog):
     v += dt/2 a;  constrained v;  u += dt v;  constrained u;  t += dt
-    halo(u) -> kinematics + stress -> halo(V P, F) -> forces -> a = f/m + b
+    halo(d) -> [gradient -> halo(f)] -> kinematics + stress -> halo(V P, f^s)
+        -> [hessian_transpose -> halo(B)] -> forces -> a = f/m + b
     v += dt/2 a;  constrained v
-Local arrays hold the rank's owned particles first, then its ghosts. Only the stages a
-scene uses are compiled and run (formulations.tlsph).
+    [updated reference: if an update is due, X^r = x, F^r = F, V^r = J V^0, new owners,
+     migration, ghosts, neighbours and corrections in X^r, forces again]
+Bracketed stages run only with Hessian stabilisation or the updated formulation. Local
+arrays hold the rank's owned particles first, then its ghosts. Only the stages a scene
+uses are compiled and run (formulations.tlsph).
 """
 
 from __future__ import annotations
@@ -21,20 +25,22 @@ from parsph import config
 from parsph.bc import BoundaryConditions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import ParsphError
-from parsph.formulations import tlsph
-from parsph.kernels.correction import reference_pairs
-from parsph.materials.elastic import MODEL_IDS
-from parsph.neighbors import find_pairs
-from parsph.parallel.decomposition import Decomposition, LocalBody
+from parsph.formulations import reference, tlsph
+from parsph.materials.elastic import MODEL_IDS, first_piola_stresses
+from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, migrate, parallel_rcb
 from parsph.parallel.runtime import collective
+
+# per-particle arrays that travel with a particle when it changes owner
+CARRIED = ("gid", "X", "measure", "volume", "mass", "support", "groups", "u", "v")
+REFERENCE_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
 
 
 class Simulation:
-    """Total-Lagrangian SPH state and stepping for the particles this rank owns."""
+    """Lagrangian corrected SPH state and stepping for the particles this rank owns."""
 
     def __init__(self, scene: dict, body: LocalBody, comm, restart: dict | None = None):
         """Set up this rank's particles (parallel.decomposition.distribute); `restart`
-        (io.checkpoint.load, its particle state in body.extra) continues a run."""
+        (io.checkpoint.load, its particle state in body.fields) continues a run."""
         self.scene = scene
         self.comm = comm
         self.dim = dim = scene["scene"]["dimension"]
@@ -45,109 +51,115 @@ class Simulation:
         self.hourglass = self.alpha > 0.0
         self.hourglass_form = tlsph.HOURGLASS_FORMS[form["hourglass_form"]] if self.hourglass else 0
         self.pair_form = form["force_form"] == "pair"
-        self._kinematics_stress, self._forces = tlsph.compile_stages(
-            dim, self.model, self.pair_form, self.hourglass_form)
+        self.updated = form["type"] == "ulsph"
+        self.eta = form["hessian"]
+        self.update_every, self.update_strain = form["update_every"], form["update_strain"]
+        self.rebalance = scene["parallel"]["rebalance"]
+        self.group_names = sorted(scene["groups"])
+        self._gradient, self._kinematics_stress, self._hessian_transpose, self._forces = \
+            tlsph.compile_stages(dim, self.model, self.pair_form, self.hourglass_form, self.updated,
+                                 self.eta > 0)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
-
-        with collective(comm):
-            self.decomp = Decomposition(body, comm)
-            local = self.gid = body.gid
-            self.n_owned = body.n_owned
-            self.X, self.mass, self.volume = body.X, body.mass, body.volume
-            self.measure, self.support = body.measure, body.support
-            # rows for owned particles and for ghosts whose neighbourhood is complete
-            rows = self.decomp.n_rows
-            self.pairs = find_pairs(self.X, self.support, local, rows)
-            self.ref = reference_pairs(self.X, self.measure, self.support, local, self.pairs,
-                                       scene["kernel"]["type"])
-        self._trim_to_owned()
-        self.groups = {name: mask[: self.n_owned] for name, mask in body.groups.items()}  # owned only
-        n_local = len(self.gid)
-        self.u = np.zeros((n_local, dim))
-        self.v = np.zeros((n_local, dim))
-        self.F = np.zeros((n_local, dim, dim))
-        self.VP = np.zeros((n_local, dim, dim))
-        self.J = np.ones(n_local)
-        self.psi = np.zeros(n_local)
-        self.f_int = np.zeros((self.n_owned, dim))
-        self.f_hg = np.zeros((self.n_owned, dim) if self.hourglass else (0, dim))
-        self.youngs = np.full(n_local, self.constants.youngs)
         body_acc = scene["loads"]["body_acceleration"]
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
         self.damping = scene["time"]["damping"]
-
-        self.bcs = BoundaryConditions(scene["bc"], self.groups, dim)
         self.t = 0.0
         self.step_count = 0
+        self.updates = 0  # reference updates so far
+        self.since_update = 0  # steps since the last one
         self.strain_energy_local = 0.0
         self.hourglass_energy_local = 0.0
+        self.hourglass_released_local = 0.0  # penalty energy dropped at reference updates
         self.external_work_local = 0.0
-        self._omega_hg2 = self._hourglass_frequencies()
+        self._adopt(body)
+        n = self.n_owned
         if restart is None:
-            apply_initial_conditions(scene["initial"], self.groups, self.X[: self.n_owned],
-                                     self.u[: self.n_owned], self.v[: self.n_owned])
-            self.bcs.set_displacement(self.u[: self.n_owned], 0.0)
-            self.bcs.set_velocity(self.v[: self.n_owned], 0.0)
+            apply_initial_conditions(scene["initial"], self.groups, self.X[:n], self.u[:n], self.v[:n])
+            self.bcs.set_displacement(self.u[:n], 0.0)
+            self.bcs.set_velocity(self.v[:n], 0.0)
         else:
-            self.u[: self.n_owned] = body.extra["u"][: self.n_owned]
-            self.v[: self.n_owned] = body.extra["v"][: self.n_owned]
-            self.t, self.step_count = restart["clock"]["t"], restart["clock"]["step"]
+            clock, totals = restart["clock"], restart["totals"]
+            self.t, self.step_count = clock["t"], clock["step"]
+            self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
             if comm.rank == 0:  # global totals, carried by rank 0
-                self.hourglass_energy_local = restart["totals"]["hourglass_work"]
-                self.external_work_local = restart["totals"]["external_work"]
+                self.hourglass_energy_local = totals["hourglass_work"]
+                self.hourglass_released_local = totals.get("hourglass_released", 0.0)
+                self.external_work_local = totals["external_work"]
         self.compute_forces()
         self._external = self.external_force()  # at the current state, for the work integral
-        self._stable_dt = restart["clock"]["dt"] if restart else self._stable_time_step()
+        self._stable_dt = restart["clock"]["dt"] if restart else self._stable_time_step()[0]
 
     # ----------------------------------------------------------------- set-up helpers
-    def _trim_to_owned(self) -> None:
-        """Keep per-pair data for owned rows only (ghost rows served to build g_ji) and
-        drop the layer-2 ghosts, which only served to build the ghosts' rows."""
-        self.decomp.trim()
-        keep = len(self.decomp.local_gid)
-        self.gid, self.X = self.gid[:keep], self.X[:keep]
-        self.mass, self.volume = self.mass[:keep], self.volume[:keep]
-        self.measure, self.support = self.measure[:keep], self.support[:keep]
-        n = self.n_owned
-        ptr = self.pairs.ptr[: n + 1]
-        end = ptr[-1]
-        ref = self.ref
-        self.ptr = ptr
-        self.idx = self.pairs.idx[:end].astype(np.int64)
-        self.g = np.ascontiguousarray(ref.g[:end])
-        self.g_rev = np.ascontiguousarray(ref.g_rev[:end])
-        if np.isnan(self.g_rev).any():
-            raise ParsphError("internal: a neighbour of an owned particle has no reference row")
-        self.g_sum = np.ascontiguousarray(ref.g_sum[:n])
-        self.dx = np.ascontiguousarray(ref.dx[:end])
-        self.w = np.ascontiguousarray(ref.w[:end])
-        self.hgc, self.hreg = np.zeros(0), np.zeros(0)
-        if self.hourglass:
-            self.hgc, self.hreg = tlsph.hourglass_coefficients(
-                self.hourglass_form, self.pairs.row_of_pair()[:end], self.idx, self.dx, self.w,
-                ref.h[:end], self.volume, self.measure, self.alpha)
-        self.min_spacing = np.sqrt(np.minimum.reduceat(
-            np.einsum("pa,pa->p", self.dx, self.dx), ptr[:-1])) if end else np.full(n, np.inf)
-        del self.ref, self.pairs
+    def _adopt(self, local: LocalBody) -> None:
+        """Take `local` (owned particles with two ghost layers and all their arrays) as this
+        rank's particles: halo plan, reference data in the reference configuration (X, or
+        X^r when updated), state and work arrays for owned particles and layer-1 ghosts."""
+        fl, n, dim = local.fields, local.n_owned, self.dim
+        ref = ("Xr", "measure_r", "volume_r") if self.updated and "Xr" in fl else ("X", "measure", "volume")
+        with collective(self.comm):
+            self.decomp = Decomposition(local, self.comm)
+            self.ref = reference.build(
+                fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
+                self.scene["kernel"]["type"], self.hourglass_form, self.alpha, self.eta)
+        self.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
+        keep = self.decomp.n_rows
+        self.n_owned = n
+        self.gid = local.gid[:keep]
+        self.X, self.mass, self.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
+        self.measure, self.support = fl["measure"][:keep], fl["support"][:keep]
+        self.groups = {name: fl["groups"][:n, k].astype(bool) for k, name in enumerate(self.group_names)}
+        self.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
+        self.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
+        self.F = np.zeros((keep, dim, dim))
+        self.d, self.fs = self.u, self.F  # total-Lagrangian: the reference is X, F^r = I
+        if self.updated:
+            eye = np.broadcast_to(np.eye(dim), (keep, dim, dim))
+            self.Xr = fl["Xr"][:keep] if "Xr" in fl else self.X.copy()
+            self.Fr = np.ascontiguousarray(fl["Fr"][:keep] if "Fr" in fl else eye)
+            self.measure_r = fl["measure_r"][:keep] if "measure_r" in fl else self.measure.copy()
+            self.volume_r = fl["volume_r"][:keep] if "volume_r" in fl else self.volume.copy()
+            self.shift = self.Xr - self.X
+            self.d = np.zeros((keep, dim))
+            self.fs = np.zeros((keep, dim, dim))
+        self.f = np.zeros((keep, dim, dim) if self.eta > 0 else (0, dim, dim))
+        self.B = np.zeros((keep, dim, dim) if self.eta > 0 else (0, dim, dim))
+        self.VP = np.zeros((keep, dim, dim))
+        self.J = np.ones(keep)
+        self.psi = np.zeros(keep)
+        self.f_int = np.zeros((n, dim))
+        self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
+        self.youngs = np.full(keep, self.constants.youngs)
+        self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
+        self._omega_hg2 = self._hourglass_frequencies()
 
     def _hourglass_frequencies(self) -> np.ndarray:
         """omega_hg^2 = 2 sum_j c_ij (E_i + E_j) / m_i: a Gershgorin bound on the stiffness of
         each particle's hourglass springs (zero without hourglass control)."""
-        n = self.n_owned
-        if not self.hourglass or not len(self.idx):
+        n, ref = self.n_owned, self.ref
+        if not self.hourglass or not len(ref.idx):
             return np.zeros(n)
-        rows = np.repeat(np.arange(n), np.diff(self.ptr))
-        k = self.hgc * (self.youngs[rows] + self.youngs[self.idx])
+        rows = np.repeat(np.arange(n), np.diff(ref.ptr))
+        k = ref.hgc * (self.youngs[rows] + self.youngs[ref.idx])
         return 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
 
-    def _stable_time_step(self) -> float:
-        """CFL step (formulations.tlsph.stable_time_step) reduced over ranks, or the fixed dt."""
+    def _stable_time_step(self) -> tuple:
+        """(CFL step, largest incremental log strain), both reduced over ranks: the step from
+        formulations.tlsph.stable_time_step (or the fixed dt), the strain for the adaptive
+        reference update (0 unless it is enabled)."""
         settings = self.scene["time"]
+        n = self.n_owned
+        local = np.zeros(2)
+        if settings["dt"] == 0:
+            local[0] = -tlsph.stable_time_step(n, self.fs, self.F, self.J, self.ref.min_spacing,
+                                               self._omega_hg2, self.constants.wave_speed, self.model,
+                                               self.dim)
+        if self.updated and self.update_strain > 0:
+            local[1] = tlsph.incremental_strain(n, self.fs, self.dim)
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MAX)
         if settings["dt"] > 0:
-            return settings["dt"]
-        local = tlsph.stable_time_step(self.n_owned, self.F, self.J, self.min_spacing, self._omega_hg2,
-                                       self.constants.wave_speed, self.model, self.dim)
-        dt = settings["cfl"] * self.comm.allreduce(local, op=MPI.MIN)
+            return settings["dt"], local[1]
+        dt = -settings["cfl"] * local[0]
         if not dt > 0.0:
             error = ParsphError(
                 f"the stable time step collapsed to zero at step {self.step_count}, t = {self.t:.6g}: "
@@ -155,21 +167,34 @@ class Simulation:
                 "formulation.hourglass or refine the particles")
             error.agreed = True  # every rank has the same reduced dt and raises this
             raise error
-        return dt
+        return dt, local[1]
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self) -> None:
         """Stages of the force evaluation at the current u; sets self.acc (owned)."""
-        n = self.n_owned
+        n, ref = self.n_owned, self.ref
         lam, mu, bulk = self.constants.lam, self.constants.mu, self.constants.bulk
         clock = time.perf_counter
+        stages = self.stage_seconds
         t0 = clock()
-        self.decomp.refresh(self.u)
+        if self.updated:
+            np.subtract(self.u[:n], self.shift[:n], out=self.d[:n])
+        self.decomp.refresh(self.d)
         t1 = clock()
+        stages["halo"] += t1 - t0
+        if self.eta > 0:
+            self._gradient(n, ref.ptr, ref.idx, ref.g, self.d, self.f)
+            t2 = clock()
+            stages["kinematics+stress"] += t2 - t1
+            self.decomp.refresh(self.f)
+            t1 = clock()
+            stages["halo"] += t1 - t2
         energy, hg_energy, bad = self._kinematics_stress(
-            n, self.ptr, self.idx, self.g, self.dx, self.hgc, self.u, self.volume, self.youngs,
-            lam, mu, bulk, self.F, self.VP, self.J, self.psi)
+            n, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, self.d, self.volume, self.youngs,
+            lam, mu, bulk, self.f, self.fs, self.F, self.Fr if self.updated else self.F, self.VP, self.J,
+            self.psi)
         t2 = clock()
+        stages["kinematics+stress"] += t2 - t1
         if bad >= 0:
             x = self.X[bad] + self.u[bad]
             where = ", ".join(f"{c:.6g}" for c in x)
@@ -180,15 +205,15 @@ class Simulation:
         self.strain_energy_local = energy
         if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
             self.hourglass_energy_local = hg_energy
-        self.decomp.refresh(self.VP, *((self.F,) if self.hourglass else ()))
+        self.decomp.refresh(self.VP, *((self.fs,) if self.hourglass else ()))
+        if self.eta > 0:
+            self._hessian_transpose(n, ref.ptr, ref.idx, ref.gh, ref.gh_rev, self.VP, self.B)
+            self.decomp.refresh(self.B)
         t3 = clock()
-        self._forces(n, self.ptr, self.idx, self.g, self.g_rev, self.g_sum, self.dx, self.hgc,
-                     self.hreg, self.u, self.F, self.VP, self.youngs, self.f_int, self.f_hg)
-        t4 = clock()
-        stages = self.stage_seconds
-        stages["halo"] += (t1 - t0) + (t3 - t2)
-        stages["kinematics+stress"] += t2 - t1
-        stages["forces+hourglass" if self.hourglass else "forces"] += t4 - t3
+        stages["halo"] += t3 - t2
+        self._forces(n, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev, ref.q_sum, ref.dx,
+                     ref.hgc, ref.hreg, self.d, self.fs, self.VP, self.B, self.youngs, self.f_int, self.f_hg)
+        stages["forces+hourglass" if self.hourglass else "forces"] += clock() - t3
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
@@ -218,7 +243,7 @@ class Simulation:
         v += dt * self.acc
 
     def step(self) -> float:
-        """Advance one time step; returns the step size used."""
+        """Advance one time step (and update the reference if due); returns the step size."""
         start = time.perf_counter()
         inside = sum(self.stage_seconds.values())
         n = self.n_owned
@@ -241,11 +266,49 @@ class Simulation:
         self._external = self.external_force()
         self.external_work_local += 0.5 * np.sum((f_ext_old + self._external) * du)
         self.step_count += 1
-        if self.scene["time"]["dt"] == 0:
-            self._stable_dt = self._stable_time_step()
+        self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))
+        self._stable_dt, strain = self._stable_time_step()
+        if self.updated and ((self.update_every and self.since_update >= self.update_every)
+                             or (self.update_strain and strain > self.update_strain)):
+            self.update_reference()
+            self._stable_dt = self._stable_time_step()[0]
         return dt
+
+    def update_reference(self) -> None:
+        """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
+        V^r = J V^0 (Remark 1); re-decide ownership (parallel RCB of X^r) if the work is
+        out of balance, migrate the particles with their state, find ghosts and neighbours
+        in X^r, rebuild the corrections and evaluate the forces in the new reference."""
+        start = time.perf_counter()
+        n = self.n_owned
+        owned = {"gid": self.gid[:n], "X": self.X[:n], "measure": self.measure[:n],
+                 "volume": self.volume[:n], "mass": self.mass[:n], "support": self.support[:n],
+                 "groups": self._group_matrix(), "u": self.u[:n], "v": self.v[:n],
+                 "Xr": self.X[:n] + self.u[:n], "Fr": self.F[:n].copy(),
+                 "measure_r": self.J[:n] * self.measure[:n], "volume_r": self.J[:n] * self.volume[:n]}
+        if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
+            self.hourglass_released_local += self.hourglass_energy_local  # the penalty restarts at 0
+        dest = np.full(n, self.comm.rank, np.int64)
+        if self.comm.size > 1:
+            work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
+            if work.max() > (1.0 + self.rebalance) * work.mean():
+                dest = parallel_rcb(owned["Xr"], owned["gid"], self.comm)
+        with collective(self.comm):
+            local = add_ghosts(migrate(owned, dest, self.comm), "Xr", self.comm)
+        self._adopt(local)
+        self.stage_seconds["reference update"] += time.perf_counter() - start
+        self.compute_forces()
+        self._external = self.external_force()
+        self.updates += 1
+        self.since_update = 0
+
+    def _group_matrix(self) -> np.ndarray:
+        n = self.n_owned
+        if not self.group_names:
+            return np.zeros((n, 0), np.uint8)
+        return np.stack([self.groups[k] for k in self.group_names], axis=1).astype(np.uint8)
 
     @property
     def dt(self) -> float:
@@ -253,18 +316,24 @@ class Simulation:
         return self._stable_dt
 
     def checkpoint_state(self) -> dict:
-        """Everything io.checkpoint stores, for the owned particles (collective: totals)."""
+        """Everything io.checkpoint stores (collective: totals): per-particle arrays of the
+        owned particles (with the updated reference, if any), and the accumulated totals."""
         n = self.n_owned
-        names = sorted(self.groups)
-        totals = self.comm.allgather((self.hourglass_energy_local
-                                      if self.hourglass_form == tlsph.HOURGLASS_PAPER else 0.0,
-                                      self.external_work_local))
+        totals = np.array(self.comm.allgather((
+            self.hourglass_energy_local if self.hourglass_form == tlsph.HOURGLASS_PAPER else 0.0,
+            self.hourglass_released_local, self.external_work_local))).sum(axis=0)
+        fields = {"X": self.X[:n], "measure": self.measure[:n], "volume": self.volume[:n],
+                  "mass": self.mass[:n], "support": self.support[:n], "u": self.u[:n], "v": self.v[:n],
+                  "groups": self._group_matrix()}
+        if self.updated:
+            fields.update(Xr=self.Xr[:n], Fr=self.Fr[:n], measure_r=self.measure_r[:n],
+                          volume_r=self.volume_r[:n])
         return {
-            "X": self.X[:n], "measure": self.measure[:n], "volume": self.volume[:n],
-            "mass": self.mass[:n], "support": self.support[:n], "u": self.u[:n], "v": self.v[:n],
-            "groups": np.stack([self.groups[k] for k in names], axis=1).astype(np.uint8),
-            "group_names": names,
-            "totals": {"hourglass_work": sum(h for h, _ in totals), "external_work": sum(e for _, e in totals)},
+            "fields": fields, "group_names": self.group_names,
+            "totals": {"hourglass_work": float(totals[0]), "hourglass_released": float(totals[1]),
+                       "external_work": float(totals[2])},
+            "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
+                      "since_update": self.since_update},
         }
 
     # ----------------------------------------------------------------- read-outs
@@ -296,13 +365,17 @@ class Simulation:
     def disorder(self) -> np.ndarray:
         """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
         out = np.empty(self.n_owned)
-        tlsph.hourglass_error(self.n_owned, self.ptr, self.idx, self.dx, self.w, self.u, self.F, out)
+        ref = self.ref
+        tlsph.hourglass_error(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out)
         return out
 
     def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
-        """sigma = J^-1 P F^T (in-plane block in 2D)."""
-        P = self.VP[sel] / self.volume[sel, None, None]
-        return np.einsum("nab,ncb->nac", P, self.F[sel]) / self.J[sel, None, None]
+        """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law alone."""
+        F = np.ascontiguousarray(self.F[sel])
+        P = np.empty_like(F)
+        c = self.constants
+        first_piola_stresses(self.model, F, self.dim, c.lam, c.mu, c.bulk, P)
+        return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
 
     def von_mises(self, sel: np.ndarray) -> np.ndarray:
         s = self.cauchy_stress(sel)
@@ -313,7 +386,8 @@ class Simulation:
         return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
 
     def diagnostics(self) -> dict:
-        out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt}
+        out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
+               "reference_updates": float(self.updates)}
         out.update(global_diagnostics(self))
         out.update(probe_values(self.scene["probes"], self))
         return out

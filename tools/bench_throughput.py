@@ -56,7 +56,7 @@ def measure(dim, particles, alpha, form, steps):
         sim.step()
     seconds = time.perf_counter() - start
     n = sim.n_owned
-    pairs = int(sim.ptr[-1])
+    pairs = int(sim.ref.ptr[-1])
     return {"dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
             "hourglass_form": form if alpha > 0 else "-", "steps": steps,
             "us_per_particle_step": 1e6 * seconds / (steps * n)}

@@ -1,16 +1,25 @@
-"""Total-Lagrangian corrected SPH [G §2], [V §2.3]: the two compiled stages of a step.
+"""Lagrangian corrected SPH [G §2], [V §2.3, §3]: the compiled stages of a step.
+
+Quantities are measured from the reference configuration X^r: the initial one in the
+total-Lagrangian formulation (F^r = I), the last updated one in the updated formulation
+[V §3.1]; d = x - X^r is the displacement since the reference.
 
 Stage 1, `kinematics_stress`: for each owned particle
-    F_i = I + sum_j (u_j - u_i) (x) g_ij                      [G eq. 17], [V eq. 9]
-    P_i = P(F_i), psi_i                                       (materials.elastic)
-and the stored product VP_i = V_i P_i that stage 2 reads for particles and ghosts.
+    f_i = I + sum_j (d_j - d_i) (x) g_ij                      [G eq. 17], [V eq. 12]
+    optionally stabilised by Hessian's difference [V eq. 17, 21]:
+    f_i^s = f_i + eta sum_j [(d_j - d_i) (x) Hc_ij h - (f_j - f_i) (g_ij . h)]
+    (f of the neighbours comes from the extra pass `gradient` and a halo refresh)
+    F_i = f_i^s F^r_i,  P_i = P(F_i), psi_i                   (materials.elastic)
+and the stored product VP_i = V^0_i P_i F^rT_i [V eq. 14] that stage 2 reads.
 
 Stage 2, `forces`: the internal force in one of two forms,
     pair form [G eq. 24]:   f_i = sum_j (V_i P_i g_ij - V_j P_j g_ji)
     virtual work [V eq. 11]: f_i = -sum_{j in S_i + {i}} V_j P_j G_i(X_j),
         with G_i(X_j) = g_ji and the self coefficient G_i(X_i) = -sum_k g_ik,
 which agree in exact arithmetic when F uses the symmetrised corrected gradient (they
-differ by summation order only); both conserve linear momentum.
+differ by summation order only); both conserve linear momentum. With Hessian
+stabilisation the forces are the exact transpose of f^s: V P - B with g plus V P with
+eta Hc h, B from `hessian_transpose` (so energy is conserved between updates).
 
 Hourglass control penalises the error e^i_ij = F_i X_ij - x_ij, the part of the neighbour
 separation that F does not explain [G eq. 25-26]:
@@ -29,8 +38,8 @@ separation that F does not explain [G eq. 25-26]:
     and the hourglass stress A_i = dPhi/dF_i = sum_j c_ij E_i e^i_ij (x) X_ij, which enters
     the internal force exactly like V_i P_i. Energy (with Phi) and linear and angular
     momentum are conserved.
-`compile_stages` makes both stages for one scene's switches (dimension, material, force
-form, hourglass form), captured as compile-time constants: a scene's machine code holds
+`compile_stages` makes the stages for one scene's switches (dimension, material, force
+form, hourglass form, updated reference, Hessian stabilisation), captured as compile-time constants: a scene's machine code holds
 only the terms it uses. Compiled code is cached on disk per combination.
 """
 
@@ -71,35 +80,74 @@ VARIATIONAL_SCALE = 0.2
 
 
 @functools.lru_cache(maxsize=None)
-def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int):
-    """(kinematics_stress, forces) specialised for one scene's switches.
+def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int, updated: bool = False,
+                   hessian: bool = False):
+    """(gradient, kinematics_stress, hessian_transpose, forces) for one scene's switches.
 
     The switches are closure constants; the stage bodies are inlined, so branches on them
-    are folded away by the compiler.
+    are folded away by the compiler. `gradient` and `hessian_transpose` are the extra
+    passes of Hessian's-difference stabilisation.
     """
     source = _SOURCE_HASH
 
     @njit(cache=True)
-    def kinematics_stress(n, ptr, idx, g, dx, hgc, u, volume, youngs, lam, mu, bulk, F, VP, J, psi):
+    def gradient(n, ptr, idx, g, d, f):
+        """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles 0..n-1 [V eq. 12]."""
+        source  # noqa: B018 - keys the disk cache to the source text
+        _gradient(dim, n, ptr, idx, g, d, f)
+
+    @njit(cache=True)
+    def kinematics_stress(n, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, lam, mu, bulk, f, fs, F,
+                          Fr, VP, J, psi):
         """Stage 1 for particles 0..n-1; returns (strain energy, hourglass potential,
         first inverted particle or -1)."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, youngs, lam,
-                           mu, bulk, F, VP, J, psi)
+        return _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, dx, hgc, d,
+                           volume, youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi)
 
     @njit(cache=True)
-    def forces(n, ptr, idx, g, g_rev, g_sum, dx, hgc, hreg, u, F, VP, youngs, f_int, f_hg):
+    def hessian_transpose(n, ptr, idx, gh, gh_rev, VP, B):
+        """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
+        [V eq. 21] feeds back into the forces."""
+        source  # noqa: B018 - keys the disk cache to the source text
+        for i in range(n):
+            for a in range(dim):
+                for b in range(dim):
+                    B[i, a, b] = 0.0
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                for a in range(dim):
+                    for b in range(dim):
+                        B[i, a, b] += VP[j, a, b] * gh_rev[p] - VP[i, a, b] * gh[p]
+
+    @njit(cache=True)
+    def forces(n, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
+               f_int, f_hg):
         """Stage 2 for particles 0..n-1: internal force f_int and, if enabled, f_hg."""
         source  # noqa: B018 - keys the disk cache to the source text
-        _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, hreg, u, F, VP,
-                youngs, f_int, f_hg)
+        _forces(dim, pair_form, hourglass, hessian, n, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx,
+                hgc, hreg, d, fs, VP, B, youngs, f_int, f_hg)
 
-    return kinematics_stress, forces
+    return gradient, kinematics_stress, hessian_transpose, forces
 
 
 @njit(cache=True, inline="always")
-def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, youngs, lam, mu, bulk,
-                F, VP, J, psi):
+def _gradient(dim, n, ptr, idx, g, d, f):
+    for i in range(n):
+        for a in range(dim):
+            for b in range(dim):
+                f[i, a, b] = 1.0 if a == b else 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            for a in range(dim):
+                du = d[j, a] - d[i, a]
+                for b in range(dim):
+                    f[i, a, b] += du * g[p, b]
+
+
+@njit(cache=True, inline="always")
+def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, dx, hgc, d, volume,
+                youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi):
     P = np.empty((dim, dim))
     S = np.empty((dim, dim))
     C = np.empty((dim, dim))
@@ -109,15 +157,34 @@ def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, young
     hg_energy = 0.0
     first_bad = -1
     for i in range(n):
-        for a in range(dim):
-            for b in range(dim):
-                F[i, a, b] = 1.0 if a == b else 0.0
-        for p in range(ptr[i], ptr[i + 1]):
-            j = idx[p]
+        # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
+        if hessian:
             for a in range(dim):
-                du = u[j, a] - u[i, a]
                 for b in range(dim):
-                    F[i, a, b] += du * g[p, b]
+                    fs[i, a, b] = f[i, a, b]
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                for a in range(dim):
+                    dd = d[j, a] - d[i, a]
+                    for b in range(dim):
+                        fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
+        else:
+            for a in range(dim):
+                for b in range(dim):
+                    fs[i, a, b] = 1.0 if a == b else 0.0
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                for a in range(dim):
+                    du = d[j, a] - d[i, a]
+                    for b in range(dim):
+                        fs[i, a, b] += du * g[p, b]
+        if updated:  # F = f F^r [V §3.1]
+            for a in range(dim):
+                for b in range(dim):
+                    s = 0.0
+                    for k in range(dim):
+                        s += fs[i, a, k] * Fr[i, k, b]
+                    F[i, a, b] = s
         e = stress(model, F[i], dim, lam, mu, bulk, P, S, C, Cinv)
         J[i] = det(F[i], dim)
         if not (math.isfinite(e) and J[i] > 0.0) and first_bad < 0:
@@ -126,9 +193,15 @@ def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, young
         energy += volume[i] * e
         for a in range(dim):
             for b in range(dim):
-                VP[i, a, b] = volume[i] * P[a, b]
+                if updated:  # V0 P F^rT [V eq. 14]
+                    s = 0.0
+                    for k in range(dim):
+                        s += P[a, k] * Fr[i, b, k]
+                    VP[i, a, b] = volume[i] * s
+                else:
+                    VP[i, a, b] = volume[i] * P[a, b]
         if hourglass == HOURGLASS_VARIATIONAL:
-            # hourglass "stress" A_i = dPhi/dF_i = sum_j c_ij E_i e_ij (x) X_ij, added to V_i P_i
+            # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
                 k = hgc[p] * youngs[i]
@@ -136,8 +209,8 @@ def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, young
                 for a in range(dim):
                     fx = 0.0
                     for b in range(dim):
-                        fx += F[i, a, b] * dx[p, b]
-                    err[a] = fx - dx[p, a] - u[j, a] + u[i, a]
+                        fx += fs[i, a, b] * dx[p, b]
+                    err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
                     e2 += err[a] * err[a]
                 hg_energy += 0.5 * k * e2
                 for a in range(dim):
@@ -147,8 +220,10 @@ def _kinematics(dim, model, hourglass, n, ptr, idx, g, dx, hgc, u, volume, young
 
 
 @njit(cache=True, inline="always")
-def _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, hreg, u, F, VP,
-            youngs, f_int, f_hg):
+def _forces(dim, pair_form, hourglass, hessian, n, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc,
+            hreg, u, F, VP, B, youngs, f_int, f_hg):
+    """With Hessian stabilisation the force is the standard one for V P - B with g plus the
+    standard one for V P with q (the transpose of [V eq. 21])."""
     xij = np.empty(dim)
     for i in range(n):
         for a in range(dim):
@@ -159,16 +234,24 @@ def _forces(dim, pair_form, hourglass, n, ptr, idx, g, g_rev, g_sum, dx, hgc, hr
             for a in range(dim):
                 s = 0.0
                 for b in range(dim):
-                    s += VP[i, a, b] * g_sum[i, b]
+                    if hessian:
+                        s += (VP[i, a, b] - B[i, a, b]) * g_sum[i, b] + VP[i, a, b] * q_sum[i, b]
+                    else:
+                        s += VP[i, a, b] * g_sum[i, b]
                 f_int[i, a] = s
         for p in range(ptr[i], ptr[i + 1]):
             j = idx[p]
             for a in range(dim):
                 s = 0.0
                 for b in range(dim):
-                    s -= VP[j, a, b] * g_rev[p, b]
-                    if pair_form:
-                        s += VP[i, a, b] * g[p, b]
+                    if hessian:
+                        s -= (VP[j, a, b] - B[j, a, b]) * g_rev[p, b] + VP[j, a, b] * q_rev[p, b]
+                        if pair_form:
+                            s += (VP[i, a, b] - B[i, a, b]) * g[p, b] + VP[i, a, b] * q[p, b]
+                    else:
+                        s -= VP[j, a, b] * g_rev[p, b]
+                        if pair_form:
+                            s += VP[i, a, b] * g[p, b]
                 f_int[i, a] += s
             if hourglass == HOURGLASS_PAPER:
                 # [G eq. 27, 32]: errors projected on the current separation, central force
@@ -264,16 +347,20 @@ def principal_stretches(F, dim):
 
 
 @njit(cache=True)
-def stable_time_step(n, F, J, min_spacing, omega_hg2, wave_speed, model, dim):
+def stable_time_step(n, fs, F, J, min_spacing, omega_hg2, wave_speed, model, dim):
     """Largest stable step of the owned particles before the CFL factor:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
-    l_i the nearest reference neighbour distance, s_min the smallest principal stretch
-    (the current spacing shrinks with it), and c_i the reference P-wave speed times the
-    law's stiffening: (3 s_max^2 - 1)/2 under stretch for Saint Venant-Kirchhoff,
-    1 - ln J under compression for the neo-Hookean laws (their tangent moduli)."""
+    l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
+    the motion from the reference fs (the current spacing shrinks with it), and c_i the
+    reference P-wave speed times the law's stiffening under the total F:
+    (3 s_max^2 - 1)/2 under stretch for Saint Venant-Kirchhoff, 1 - ln J under compression
+    for the neo-Hookean laws (their tangent moduli). In the total-Lagrangian formulation fs
+    and F are the same array."""
     dt = np.inf
     for i in range(n):
         s_min, s_max = principal_stretches(F[i], dim)
+        if fs is not F:
+            s_min = principal_stretches(fs[i], dim)[0]
         if model == SAINT_VENANT_KIRCHHOFF:
             stiffening = max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
         else:
@@ -284,3 +371,16 @@ def stable_time_step(n, F, J, min_spacing, omega_hg2, wave_speed, model, dim):
         w_el = 2.0 * wave_speed * math.sqrt(stiffening) / length
         dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
     return dt
+
+
+@njit(cache=True)
+def incremental_strain(n, fs, dim):
+    """Largest principal logarithmic strain |ln s| of the motion from the reference over
+    particles 0..n-1: the distortion measure of the adaptive reference update."""
+    worst = 0.0
+    for i in range(n):
+        s_min, s_max = principal_stretches(fs[i], dim)
+        if not s_min > 0.0:
+            return np.inf
+        worst = max(worst, math.log(s_max), -math.log(s_min))
+    return worst

@@ -1,8 +1,9 @@
 """Checkpoints: the complete state of a run, written atomically, and restart from them.
 
 A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the reference
-configuration (positions, measures, volumes, masses, kernel supports, group membership)
-and the state (displacement, velocity), plus the clock (time, step, dt), the accumulated
+configuration (positions, measures, volumes, masses, kernel supports, group membership),
+the state (displacement, velocity) and, in the updated formulation, the current reference
+(X^r, F^r, V^r), plus the clock (time, step, dt, reference updates), the accumulated
 energies, the output schedules, and the resolved scene with its hash. It is written by all
 ranks together under a temporary name, closed, and renamed, so a checkpoint either exists
 whole or not at all; the last K are kept. Every dataset carries an order-independent
@@ -27,8 +28,7 @@ from parsph.errors import InputError
 from parsph.io.h5 import ParticleFile
 from parsph.parallel.runtime import COMM, collective, say
 
-FORMAT = 1
-PARTICLE_FIELDS = ("X", "measure", "volume", "mass", "support", "groups", "u", "v")
+FORMAT = 2
 # keys that may change on restart: they do not change the physics of the steps taken
 RESTART_FREE = ("time.end", "time.max_steps", "time.wall_limit", "output.", "scene.description",
                 "scene.expected", "scene.source")
@@ -68,10 +68,10 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
     gid = sim.gid[:n]
     state = sim.checkpoint_state()
     sums = {}
+    fields = state["fields"]
     with collective():
         with ParticleFile(tmp, "w", comm) as out:
-            for field in PARTICLE_FIELDS:
-                rows = state[field]
+            for field, rows in fields.items():
                 out.write_rows(field, gid, rows, sim.decomp.total)
                 sums[field] = _sum_mod64(comm, checksum(gid, rows))
             if out.writer:
@@ -80,7 +80,8 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
                 attrs["scene"] = config.to_json(scene)
                 attrs["scene_hash"] = scene_hash(scene)
                 attrs["groups"] = json.dumps(state["group_names"])
-                attrs["clock"] = json.dumps({"t": sim.t, "step": sim.step_count, "dt": sim.dt})
+                attrs["clock"] = json.dumps(state["clock"])
+                attrs["fields"] = json.dumps(list(fields))
                 attrs["totals"] = json.dumps(state["totals"])
                 attrs["schedules"] = json.dumps(schedules)
                 attrs["checksums"] = json.dumps({k: str(v) for k, v in sums.items()})
@@ -103,7 +104,7 @@ def _validate(path: str) -> dict:
     with f:
         try:
             attrs = {k: f.attrs[k] for k in ("format", "scene", "scene_hash", "groups", "clock",
-                                              "totals", "schedules", "checksums", "particles")}
+                                              "totals", "schedules", "checksums", "particles", "fields")}
         except KeyError as exc:
             raise ValueError(f"is incomplete (attribute {exc} missing)") from None
         if attrs["format"] != FORMAT:
@@ -111,7 +112,7 @@ def _validate(path: str) -> dict:
         total = int(attrs["particles"])
         sums = json.loads(attrs["checksums"])
         gid = np.arange(total)
-        for field in PARTICLE_FIELDS:
+        for field in json.loads(attrs["fields"]):
             if field not in f or len(f[field]) != total:
                 raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
             try:
@@ -186,7 +187,7 @@ def load(path: str, comm) -> dict:
     with collective(comm):
         if comm.rank == 0:
             with h5py.File(path, "r") as f:
-                data = {field: f[field][()] for field in PARTICLE_FIELDS}
+                data = {field: f[field][()] for field in json.loads(f.attrs["fields"])}
                 data["attrs"] = {k: f.attrs[k] for k in ("scene", "groups", "clock", "totals", "schedules")}
     attrs = comm.bcast(data.pop("attrs", None), root=0)
     data["scene"] = json.loads(attrs["scene"])

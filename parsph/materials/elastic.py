@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 SAINT_VENANT_KIRCHHOFF = 0
@@ -123,3 +124,13 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
             S[a, b] = mu * jm23 * ((1.0 if a == b else 0.0) - i1 / 3.0 * Cinv[a, b]) + vol * Cinv[a, b]
     first_piola(F, S, dim, P)
     return 0.5 * mu * (jm23 * i1 - 3.0) + 0.5 * bulk * (J - 1.0) ** 2
+
+
+@njit(cache=True)
+def first_piola_stresses(model, F, dim, lam, mu, bulk, P):
+    """P[n] = P(F[n]) for a stack of deformation gradients (output and tests)."""
+    S = np.empty((dim, dim))
+    C = np.empty((dim, dim))
+    Cinv = np.empty((dim, dim))
+    for n in range(F.shape[0]):
+        stress(model, F[n], dim, lam, mu, bulk, P[n], S, C, Cinv)

@@ -1,16 +1,20 @@
-"""Ownership by reference position, distribution of the particles, and the ghost (halo) exchange.
+"""Ownership, migration of particles with their state, and the ghost (halo) exchange.
 
-Particles are partitioned by recursive coordinate bisection (RCB) of their reference
-positions, which balances counts and keeps subdomains compact. In the total-Lagrangian
-formulation the neighbour graph never changes, so the partition and the halo plan are made
-once. Local arrays are ordered: owned particles (by global id), then layer-1 ghosts
+Particles are owned by position: recursive coordinate bisection (RCB) of the reference
+positions balances the counts and keeps subdomains compact. The bisection runs in parallel
+(`parallel_rcb`: each cut is found by bisection on the coordinate with global counts), so
+no rank needs the whole particle set. A particle moves to its owner with all of its state
+(`migrate`): every per-particle array travels with it. In the total-Lagrangian formulation
+ownership is decided once; with an updated reference it is decided again at each update.
+
+A rank's local arrays are ordered: owned particles (by global id), then layer-1 ghosts
 (neighbours of owned particles, grouped by owner rank, by global id), then layer-2 ghosts
-(neighbours of layer-1 ghosts, needed only at set-up to build the ghosts' corrected
-gradients g_ji). `refresh(arrays...)` copies the owners' values of the named fields into
-the layer-1 ghost slots.
+(neighbours of layer-1 ghosts, needed only to build the ghosts' corrected gradients, by
+global id). `add_ghosts` finds both layers across ranks from the subdomains' bounding
+boxes; `Decomposition.refresh(arrays...)` copies the owners' values into the layer-1 slots.
 
-Rank 0 builds (or reads) the reference set, partitions it and sends each rank its part
-(`distribute`); no other rank ever holds the whole set.
+At start-up rank 0 builds (or reads) the particle set and hands out contiguous blocks of it
+(`distribute`); from then on every rank holds only its own particles and ghosts.
 """
 
 from __future__ import annotations
@@ -18,99 +22,176 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from parsph.build import Body
 
 
-def rcb_partition(X: np.ndarray, parts: int) -> np.ndarray:
-    """Owner rank of each particle: recursive bisection along the longest axis.
+def _smallest(c: np.ndarray, ids: np.ndarray, target: int, comm) -> np.ndarray:
+    """Mask of the local entries among the `target` globally smallest keys (c, id): the
+    cut coordinate by bisection on floats, ties broken by global id."""
+    total = comm.allreduce(len(c))
+    if target <= 0:
+        return np.zeros(len(c), bool)
+    if target >= total:
+        return np.ones(len(c), bool)
+    lo = comm.allreduce(float(c.min()) if len(c) else np.inf, op=MPI.MIN)
+    hi = np.nextafter(comm.allreduce(float(c.max()) if len(c) else -np.inf, op=MPI.MAX), np.inf)
+    # invariant: count(c < lo) <= target < count(c < hi)
+    while True:
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            break
+        if comm.allreduce(int(np.count_nonzero(c < mid))) > target:
+            hi = mid
+        else:
+            lo = mid
+    # every key in [lo, hi) has c == lo: take the smallest ids among them
+    tie = c == lo
+    need = target - comm.allreduce(int(np.count_nonzero(c < lo)))
+    glo, ghi = 0, comm.allreduce(int(ids.max()) + 1 if len(ids) else 0, op=MPI.MAX)
+    while ghi - glo > 1:
+        gm = (glo + ghi) // 2
+        if comm.allreduce(int(np.count_nonzero(tie & (ids < gm)))) > need:
+            ghi = gm
+        else:
+            glo = gm
+    return (c < lo) | (tie & (ids < glo))
 
-    Part counts are split as evenly as possible (parts need not be a power of two); ties in
-    the coordinate are broken by index, so the result is deterministic.
+
+def parallel_rcb(X: np.ndarray, gid: np.ndarray, comm) -> np.ndarray:
+    """Owner rank of each local particle: recursive bisection of all ranks' particles along
+    the longest axis of each part, computed together by all ranks.
+
+    Part counts are split as evenly as possible (any number of ranks); the result depends
+    only on the global set (positions and ids), not on where the particles are held.
     """
     owner = np.zeros(len(X), np.int64)
-
-    def split(index: np.ndarray, first: int, count: int) -> None:
-        if count == 1 or len(index) == 0:
-            owner[index] = first
-            return
-        left_parts = count // 2
-        pts = X[index]
-        axis = int(np.argmax(pts.max(axis=0) - pts.min(axis=0))) if len(index) else 0
-        order = np.lexsort((index, pts[:, axis]))
-        cut = int(round(len(index) * left_parts / count))
-        split(index[order[:cut]], first, left_parts)
-        split(index[order[cut:]], first + left_parts, count - left_parts)
-
-    split(np.arange(len(X)), 0, parts)
+    parts = [(0, comm.size)]
+    while parts:
+        halves = []
+        for first, count in parts:
+            if count == 1:
+                continue
+            mine = np.flatnonzero(owner == first)
+            pts = X[mine]
+            lo = pts.min(axis=0) if len(pts) else np.full(X.shape[1], np.inf)
+            hi = pts.max(axis=0) if len(pts) else np.full(X.shape[1], -np.inf)
+            comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+            comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+            total = comm.allreduce(len(mine))
+            left = count // 2
+            axis = int(np.argmax(hi - lo)) if total else 0
+            keep = _smallest(pts[:, axis], gid[mine], int(round(total * left / count)), comm)
+            owner[mine[~keep]] = first + left
+            halves += [(first, left), (first + left, count - left)]
+        parts = halves
     return owner
+
+
+def _take(fields: dict, index: np.ndarray) -> dict:
+    return {k: v[index] for k, v in fields.items()}
+
+
+def _concat(chunks: list, like: dict) -> dict:
+    chunks = [c for c in chunks if c is not None]
+    if not chunks:
+        return {k: v[:0] for k, v in like.items()}
+    return {k: np.concatenate([c[k] for c in chunks]) for k in like}
+
+
+def migrate(fields: dict, dest: np.ndarray, comm) -> dict:
+    """Send every local particle, with all its arrays in `fields` (one row per particle,
+    including "gid"), to rank `dest`; returns the particles this rank now owns, by gid."""
+    if comm.size > 1:
+        out = [_take(fields, np.flatnonzero(dest == r)) for r in range(comm.size)]
+        fields = _concat(comm.alltoall(out), fields)
+    order = np.argsort(fields["gid"], kind="stable")
+    return _take(fields, order)
 
 
 @dataclass
 class LocalBody:
-    """One rank's part of the reference particle set: owned particles (by global id), then
-    layer-1 ghosts (by owner rank, then global id), then layer-2 ghosts (by global id)."""
+    """One rank's particles: owned (by global id), then layer-1 ghosts (by owner rank, then
+    global id), then layer-2 ghosts (by global id). `fields` holds every per-particle array
+    (reference data, state, groups) for all of them."""
 
     gid: np.ndarray
     owner: np.ndarray
-    X: np.ndarray
-    measure: np.ndarray
-    volume: np.ndarray
-    mass: np.ndarray
-    support: np.ndarray
-    groups: dict  # name -> bool mask over the local particles
     n_owned: int
     n_ghost: int  # layer-1 ghosts
     total: int  # particles over all ranks
-    extra: dict  # further per-particle arrays sent along (a checkpoint's state)
+    fields: dict
 
 
-def _ghost_layers(X: np.ndarray, support: np.ndarray, owner: np.ndarray, rank: int):
-    """Owned particles of `rank`, their neighbours owned elsewhere (layer 1) and the
-    neighbours of those (layer 2), each as sorted global ids (layer 1 by owner, then id)."""
-    tree = cKDTree(X)
-    reach = float(support.max())
+def add_ghosts(owned: dict, position: str, comm) -> LocalBody:
+    """This rank's owned particles `owned` (by gid) plus two ghost layers found across ranks:
+    neighbours (within the largest kernel support, in the configuration `owned[position]`)
+    of owned particles, and neighbours of those. Each rank sends every other rank its
+    particles within two supports of that rank's bounding box."""
+    n = len(owned["gid"])
+    total = comm.allreduce(n)
+    if comm.size == 1:
+        return LocalBody(gid=owned["gid"], owner=np.zeros(n, np.int64), n_owned=n, n_ghost=0,
+                         total=total, fields=owned)
+    x = owned[position]
+    reach = comm.allreduce(float(owned["support"].max()) if n else 0.0, op=MPI.MAX)
+    boxes = comm.allgather((x.min(axis=0), x.max(axis=0)) if n else None)
+    out = []
+    for r, box in enumerate(boxes):
+        if r == comm.rank or box is None or n == 0:
+            out.append(None)
+            continue
+        gap = np.maximum(0.0, np.maximum(box[0] - x, x - box[1]))
+        sel = np.flatnonzero(np.einsum("na,na->n", gap, gap) <= (2.0 * reach) ** 2)
+        chunk = _take(owned, sel)
+        chunk["owner"] = np.full(len(sel), comm.rank, np.int64)
+        out.append(chunk)
+    cand = _concat(comm.alltoall(out), dict(owned, owner=np.zeros(0, np.int64)))
+    layer1 = layer2 = np.zeros(0, np.int64)
+    if n and len(cand["gid"]):
+        dist1, _ = cKDTree(x).query(cand[position], distance_upper_bound=reach)
+        layer1 = np.flatnonzero(np.isfinite(dist1))
+        rest = np.flatnonzero(~np.isfinite(dist1))
+        if len(layer1) and len(rest):
+            dist2, _ = cKDTree(cand[position][layer1]).query(cand[position][rest], distance_upper_bound=reach)
+            layer2 = rest[np.isfinite(dist2)]
+    layer1 = layer1[np.lexsort((cand["gid"][layer1], cand["owner"][layer1]))]
+    layer2 = layer2[np.argsort(cand["gid"][layer2], kind="stable")]
+    ghosts = _take(cand, np.concatenate([layer1, layer2]))
+    owner = np.concatenate([np.full(n, comm.rank, np.int64), ghosts.pop("owner")])
+    fields = {k: np.concatenate([owned[k], ghosts[k]]) for k in owned}
+    return LocalBody(gid=fields["gid"], owner=owner, n_owned=n, n_ghost=len(layer1), total=total,
+                     fields=fields)
 
-    def neighbours_of(index: np.ndarray) -> np.ndarray:
-        if len(index) == 0:
-            return np.zeros(0, np.int64)
-        hits = tree.query_ball_point(X[index], r=reach)
-        return np.unique(np.concatenate([np.asarray(h, np.int64) for h in hits]))
 
-    owned = np.flatnonzero(owner == rank)
-    known = np.zeros(len(X), bool)
-    known[owned] = True
-    layer1 = neighbours_of(owned)
-    layer1 = layer1[~known[layer1]]
-    known[layer1] = True
-    layer2 = neighbours_of(layer1)
-    layer2 = np.sort(layer2[~known[layer2]])
-    return owned, layer1[np.lexsort((layer1, owner[layer1]))], layer2
+def body_fields(body: Body, state: dict | None = None) -> dict:
+    """The per-particle arrays of a reference set (plus `state`, e.g. a checkpoint's), with
+    global ids and the groups as one uint8 column per group (sorted by name)."""
+    names = sorted(body.groups)
+    groups = np.stack([body.groups[k] for k in names], axis=1).astype(np.uint8) if names else \
+        np.zeros((body.count, 0), np.uint8)
+    fields = {"gid": np.arange(body.count, dtype=np.int64), "X": body.X, "measure": body.measure,
+              "volume": body.volume, "mass": body.mass, "support": body.support, "groups": groups}
+    fields.update(state or {})
+    return fields
 
 
-def distribute(body: Body | None, comm, extra: dict | None = None) -> LocalBody:
-    """Rank 0 partitions `body` (given on rank 0 only) by RCB of the reference positions and
-    sends every rank its owned particles with two ghost layers, plus its rows of `extra`.
-    After this no rank holds the whole particle set."""
-    parts = None
+def distribute(body: Body | None, comm, state: dict | None = None) -> LocalBody:
+    """Rank 0 hands each rank a contiguous block of `body` (given on rank 0 only) and of the
+    per-particle `state`; the ranks then partition the set by parallel RCB of the positions
+    `state["Xr"]` (an updated reference) or `body.X`, migrate, and exchange ghosts."""
+    blocks = None
     if comm.rank == 0:
-        extra = extra or {}
-        owner = rcb_partition(body.X, comm.size) if comm.size > 1 else np.zeros(body.count, np.int64)
-        parts = []
-        for r in range(comm.size):
-            if comm.size == 1:
-                owned, layer1, layer2 = np.arange(body.count), np.zeros(0, np.int64), np.zeros(0, np.int64)
-            else:
-                owned, layer1, layer2 = _ghost_layers(body.X, body.support, owner, r)
-            local = np.concatenate([owned, layer1, layer2]).astype(np.int64)
-            parts.append(LocalBody(
-                gid=local, owner=owner[local], X=np.ascontiguousarray(body.X[local]),
-                measure=body.measure[local], volume=body.volume[local], mass=body.mass[local],
-                support=body.support[local], groups={k: m[local] for k, m in body.groups.items()},
-                n_owned=len(owned), n_ghost=len(layer1), total=body.count,
-                extra={k: v[local] for k, v in extra.items()}))
-    return comm.scatter(parts, root=0) if comm.size > 1 else parts[0]
+        fields = body_fields(body, state)
+        cuts = np.linspace(0, body.count, comm.size + 1).round().astype(int)
+        blocks = [_take(fields, np.arange(cuts[r], cuts[r + 1])) for r in range(comm.size)]
+    mine = comm.scatter(blocks, root=0) if comm.size > 1 else blocks[0]
+    position = "Xr" if "Xr" in mine else "X"
+    if comm.size > 1:
+        mine = migrate(mine, parallel_rcb(mine[position], mine["gid"], comm), comm)
+    return add_ghosts(mine, position, comm)
 
 
 class Decomposition:

@@ -1,0 +1,96 @@
+"""The per-pair data of a reference configuration that the compiled stages read.
+
+Built once in the total-Lagrangian formulation and again at every update of the reference
+in the updated one [V §3.1]: neighbours (neighbors.find_pairs), corrected gradients
+g_ij = V_j L_i^-1 grad W [V eq. 13] with their reverse g_ji and row sums, hourglass
+coefficients [G eq. 31], and for Hessian's-difference stabilisation [V eq. 17, 21]
+
+    q_ij  = eta Hc_ij h_i        (corrected kernel Hessian times the vector h, kernels.hessian)
+    gh_ij = eta g_ij . h_i
+
+with h_i = (l_i, ..., l_i) and l_i = support_i / 2, the smoothing length (Remark 2: equal
+components along the Cartesian axes, constant in time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsph.errors import ParsphError
+from parsph.formulations import tlsph
+from parsph.kernels.correction import reference_pairs, reverse_index
+from parsph.kernels.hessian import corrected_hessians
+from parsph.neighbors import find_pairs
+
+
+@dataclass
+class ReferenceData:
+    """CSR rows of the owned particles (indices into the rank's local arrays)."""
+
+    ptr: np.ndarray
+    idx: np.ndarray
+    dx: np.ndarray  # X_j - X_i in the reference
+    w: np.ndarray  # kernel values
+    g: np.ndarray
+    g_rev: np.ndarray
+    g_sum: np.ndarray
+    hgc: np.ndarray  # hourglass coefficients c_ij (empty without hourglass control)
+    hreg: np.ndarray  # regularising lengths of the paper form
+    q: np.ndarray  # Hessian stabilisation (empty when eta = 0)
+    q_rev: np.ndarray
+    q_sum: np.ndarray
+    gh: np.ndarray
+    gh_rev: np.ndarray
+    min_spacing: np.ndarray  # nearest reference neighbour distance of each owned particle
+
+
+def _reverse(values, rev):
+    out = values[np.maximum(rev, 0)]
+    out[rev < 0] = np.nan
+    return out
+
+
+def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str,
+          hourglass_form: int, alpha: float, eta: float) -> ReferenceData:
+    """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
+    and layer-1 ghosts) are built to provide the reverse coefficients g_ji."""
+    pairs = find_pairs(X, support, gid, n_rows)
+    ref = reference_pairs(X, measure, support, gid, pairs, kernel)
+    n = n_owned
+    end = int(pairs.ptr[n])
+    ptr = pairs.ptr[: n + 1].copy()
+    idx = pairs.idx[:end].astype(np.int64)
+    if np.isnan(ref.g_rev[:end]).any():
+        raise ParsphError("internal: a neighbour of an owned particle has no reference row")
+    rows = pairs.row_of_pair()[:end]
+    hgc, hreg = np.zeros(0), np.zeros(0)
+    if hourglass_form:
+        hgc, hreg = tlsph.hourglass_coefficients(hourglass_form, rows, idx, ref.dx[:end], ref.w[:end],
+                                                 ref.h[:end], volume, measure, alpha)
+    dim = X.shape[1]
+    q = q_rev = np.zeros((0, dim))
+    gh = gh_rev = np.zeros(0)
+    q_sum = np.zeros((0, dim))
+    if eta > 0:
+        hvec = 0.5 * support[: n_rows]
+        row_all = pairs.row_of_pair()
+        Hc = corrected_hessians(pairs, ref.dx, ref.h, measure, gid, kernel)
+        q_all = eta * hvec[row_all, None] * Hc.sum(axis=2)
+        gh_all = eta * hvec[row_all] * ref.g.sum(axis=1)
+        rev = reverse_index(pairs, len(X))[:end]
+        q, gh = np.ascontiguousarray(q_all[:end]), np.ascontiguousarray(gh_all[:end])
+        q_rev, gh_rev = np.ascontiguousarray(_reverse(q_all, rev)), np.ascontiguousarray(_reverse(gh_all, rev))
+        q_sum = np.zeros((n, dim))
+        np.add.at(q_sum, rows, q)
+    d2 = np.einsum("pa,pa->p", ref.dx[:end], ref.dx[:end])
+    min_spacing = np.full(n, np.inf)
+    has = np.diff(ptr) > 0
+    if end:
+        min_spacing[has] = np.sqrt(np.minimum.reduceat(d2, ptr[:-1][has]))
+    return ReferenceData(
+        ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), w=np.ascontiguousarray(ref.w[:end]),
+        g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
+        g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, hreg=hreg, q=q, q_rev=q_rev, q_sum=q_sum,
+        gh=gh, gh_rev=gh_rev, min_spacing=min_spacing)
