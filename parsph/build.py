@@ -83,7 +83,7 @@ def build_body(scene: dict) -> Body:
             groups[name] = geometry.select(spec, X, measure)
         except ValueError as exc:
             raise InputError(f"groups.{name}: {exc}") from None
-    used = {item["group"] for key in ("bc", "initial", "probes") for item in scene[key]}
+    used = {item["group"] for key in ("bc", "walls", "initial", "probes") for item in scene[key]}
     for name in sorted(used):
         if not groups[name].any():
             raise InputError(f"group '{name}' selects no particles; check groups.{name}")

@@ -62,7 +62,7 @@ def in_range(lo, hi, lo_open=False, hi_open=False):
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = ("saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible")
 PROBE_QUANTITIES = ("displacement", "velocity", "position", "reaction", "force", "J", "von_mises",
-                    "disorder")
+                    "disorder", "spacing_ratio")
 SNAPSHOT_FIELDS = PROBE_QUANTITIES + ("rank", "reference_position", "cauchy_stress")
 
 
@@ -177,6 +177,14 @@ BC_KEYS = {
     "components": Key("intlist", None, doc="constrained components (default: all)"),
     "ramp": Key("float", 0.0, non_negative, "time over which the value ramps up from 0 [s]"),
 }
+WALL_KEYS = {
+    "group": Key("str", "all", doc="particles that can touch the wall"),
+    "point": Key("vector", REQUIRED, doc="a point of the plane at t = 0 [m]"),
+    "normal": Key("vector", REQUIRED, doc="normal pointing into the material"),
+    "velocity": Key("vector", None, doc="the wall's prescribed velocity [m/s] (default at rest)"),
+    "lower": Key("vector", None, doc="with upper: the box of current positions where the wall acts"),
+    "upper": Key("vector", None),
+}
 INITIAL_KEYS = {
     "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient")),
     "group": Key("str", "all"),
@@ -193,7 +201,7 @@ PROBE_KEYS = {
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
-TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "initial", "probes")
+TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "initial", "probes")
 
 
 def _suggest(name: str, known) -> str:
@@ -362,6 +370,20 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
             raise InputError(f"missing required key 'bc[{i}].value' for a '{bc['type']}' condition")
         _vector_len(f"bc[{i}].value", bc["value"], dim)
         scene["bc"].append(bc)
+
+    scene["walls"] = []
+    for i, t in enumerate(_array("walls", raw.get("walls"))):
+        wall = _table(f"walls[{i}]", t, WALL_KEYS, dim)
+        check_group(f"walls[{i}].group", wall["group"])
+        if wall["velocity"] is None:
+            wall["velocity"] = [0.0] * dim
+        for key in ("point", "normal", "velocity", "lower", "upper"):
+            _vector_len(f"walls[{i}].{key}", wall[key], dim)
+        if not any(c != 0 for c in wall["normal"]):
+            raise InputError(f"walls[{i}].normal must not be zero")
+        if (wall["lower"] is None) != (wall["upper"] is None):
+            raise InputError(f"walls[{i}]: give both lower and upper, or neither")
+        scene["walls"].append(wall)
 
     scene["initial"] = []
     for i, t in enumerate(_array("initial", raw.get("initial"))):

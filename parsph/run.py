@@ -23,7 +23,8 @@ from parsph.progress import Progress
 
 RUN_FILES = ("history.h5", "snapshots.h5", "snapshots.xdmf", "scene.json")
 PROBE_UNITS = {"displacement": "m", "velocity": "m/s", "position": "m", "reaction": "N", "force": "N",
-               "J": "1", "von_mises": "Pa", "disorder": "1"}
+               "J": "1", "von_mises": "Pa", "disorder": "1",
+               "spacing_ratio": "1"}
 
 
 def check_output(out_dir: str, overwrite: bool) -> list:

@@ -24,11 +24,12 @@ from mpi4py import MPI
 from parsph import config
 from parsph.bc import BoundaryConditions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
-from parsph.errors import ParsphError
+from parsph.errors import InputError, ParsphError
 from parsph.formulations import reference, tlsph
 from parsph.materials.elastic import MODEL_IDS, first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, migrate, parallel_rcb
 from parsph.parallel.runtime import collective
+from parsph.walls import Walls
 
 # per-particle arrays that travel with a particle when it changes owner
 CARRIED = ("gid", "X", "measure", "volume", "mass", "support", "groups", "u", "v")
@@ -130,6 +131,7 @@ class Simulation:
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.youngs = np.full(keep, self.constants.youngs)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
+        self.walls = Walls(self.scene["walls"], self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
 
     def _hourglass_frequencies(self) -> np.ndarray:
@@ -151,7 +153,7 @@ class Simulation:
         local = np.zeros(2)
         if settings["dt"] == 0:
             local[0] = -tlsph.stable_time_step(n, self.fs, self.F, self.J, self.ref.min_spacing,
-                                               self._omega_hg2, self.constants.wave_speed, self.model,
+                                               self.ref.stiffening, self._omega_hg2, self.constants.wave_speed, self.model,
                                                self.dim)
         if self.updated and self.update_strain > 0:
             local[1] = tlsph.incremental_strain(n, self.fs, self.dim)
@@ -256,6 +258,7 @@ class Simulation:
         self.u[:n] += dt * self.v[:n]
         self.t += dt
         self.bcs.set_displacement(self.u[:n], self.t)
+        self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
         self.compute_forces()
         self._kick(0.5 * dt)
         self.bcs.set_velocity(self.v[:n], self.t)
@@ -297,7 +300,15 @@ class Simulation:
                 dest = parallel_rcb(owned["Xr"], owned["gid"], self.comm)
         with collective(self.comm):
             local = add_ghosts(migrate(owned, dest, self.comm), "Xr", self.comm)
-        self._adopt(local)
+        try:
+            self._adopt(local)
+        except InputError as exc:  # the configuration, not the input, is at fault
+            error = ParsphError(
+                f"reference update {self.updates + 1} at step {self.step_count}, t = {self.t:.6g} failed: "
+                f"{exc}. The particles are too disordered for a new reference: update earlier "
+                "(formulation.update_strain), raise the stabilisation or refine the particles")
+            error.agreed = getattr(exc, "agreed", False)
+            raise error from None
         self.stage_seconds["reference update"] += time.perf_counter() - start
         self.compute_forces()
         self._external = self.external_force()
@@ -360,6 +371,8 @@ class Simulation:
             return self.cauchy_stress(sel)
         if name == "disorder":
             return self.disorder()[sel]
+        if name == "spacing_ratio":
+            return self.spacing_ratio()[sel]
         raise ValueError(name)
 
     def disorder(self) -> np.ndarray:
@@ -367,6 +380,15 @@ class Simulation:
         out = np.empty(self.n_owned)
         ref = self.ref
         tlsph.hourglass_error(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out)
+        return out
+
+    def spacing_ratio(self) -> np.ndarray:
+        """Current-configuration disorder of each owned particle (tlsph.spacing_ratio), with the
+        ghosts where the last force evaluation saw them."""
+        out = np.empty(self.n_owned)
+        ref = self.ref
+        x = self.Xr + self.d if self.updated else self.X + self.u
+        tlsph.spacing_ratio(self.n_owned, ref.ptr, ref.idx, x, self.measure, self.F, self.dim, out)
         return out
 
     def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
@@ -389,5 +411,10 @@ class Simulation:
         out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
                "reference_updates": float(self.updates)}
         out.update(global_diagnostics(self))
+        if len(self.walls.items):
+            force = self.comm.allreduce(self.walls.force)
+            for k, f in enumerate(force):
+                for a, name in enumerate("xyz"[: self.dim]):
+                    out[f"wall{k}_force_{name}"] = f[a]
         out.update(probe_values(self.scene["probes"], self))
         return out

@@ -30,7 +30,7 @@ placement = "node"
 
 [kernel]
 type = "cubic_spline"
-support = 2.1
+support = 1.5
 
 [material]
 model = "saint_venant_kirchhoff"

@@ -320,6 +320,26 @@ def hourglass_error(n, ptr, idx, dx, w, u, F, out):
 
 
 @njit(cache=True)
+def spacing_ratio(n, ptr, idx, x, measure, F, dim, out):
+    """Particle disorder seen in the current configuration, for any formulation:
+        r_i = min_j |x_j - x_i| / (measure_i^(1/d) s_min(F_i)),
+    the nearest current neighbour against the spacing the smooth deformation F (total)
+    would give. At least about 1 for an affinely deformed lattice; particles that pair up or
+    collapse onto each other drive it towards 0."""
+    for i in range(n):
+        nearest = np.inf
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            r2 = 0.0
+            for a in range(dim):
+                e = x[j, a] - x[i, a]
+                r2 += e * e
+            nearest = min(nearest, r2)
+        s_min = principal_stretches(F[i], dim)[0]
+        out[i] = math.sqrt(nearest) / (measure[i] ** (1.0 / dim) * s_min) if s_min > 0 else 0.0
+
+
+@njit(cache=True)
 def principal_stretches(F, dim):
     """(smallest, largest) principal stretch of F: square roots of the extreme eigenvalues
     of C = F^T F (closed form for a symmetric 2x2 or 3x3 matrix)."""
@@ -347,7 +367,7 @@ def principal_stretches(F, dim):
 
 
 @njit(cache=True)
-def stable_time_step(n, fs, F, J, min_spacing, omega_hg2, wave_speed, model, dim):
+def stable_time_step(n, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, model, dim):
     """Largest stable step of the owned particles before the CFL factor:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
@@ -368,7 +388,7 @@ def stable_time_step(n, fs, F, J, min_spacing, omega_hg2, wave_speed, model, dim
         length = min_spacing[i] * min(1.0, s_min)
         if not (length > 0.0 and stiffening < np.inf):
             return 0.0  # a flattened or inverted particle: no stable step
-        w_el = 2.0 * wave_speed * math.sqrt(stiffening) / length
+        w_el = 2.0 * wave_speed * math.sqrt(stiffening * stab[i]) / length
         dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
     return dt
 

@@ -93,6 +93,10 @@ def reference_pairs(
     row = pairs.row_of_pair()
     dx = positions[pairs.idx] - positions[row]
     dist = np.linalg.norm(dx, axis=1)
+    if len(dist) and not dist.min() > 0.0:
+        p = int(np.argmin(dist))
+        where = ", ".join(f"{c:.6g}" for c in positions[row[p]])
+        raise InputError(f"particles {int(gid[row[p]])} and {int(gid[pairs.idx[p]])} coincide at ({where})")
     h_pair = 0.5 * (support[row] + support[pairs.idx])
     w, dwdr, _ = evaluate(kernel, dist, h_pair, dim)
     L = np.empty((rows, dim, dim))

@@ -27,6 +27,7 @@ def _corrected(ptr, dx, dwdr, d2w, dist, vol_k, dim, Hc, bad):
     H = np.empty((dim, dim))
     C = np.empty((dim, dim, dim))
     D = np.empty((dim, dim))
+    A = np.empty((dim, dim, dim))
     for i in range(len(ptr) - 1):
         C[:] = 0.0
         D[:] = 0.0
@@ -44,15 +45,19 @@ def _corrected(ptr, dx, dwdr, d2w, dist, vol_k, dim, Hc, bad):
             bad[i] = True
             continue
         Dinv = np.linalg.inv(D)
+        for a in range(dim):
+            for b in range(dim):
+                for c in range(dim):
+                    s = 0.0
+                    for e in range(dim):
+                        s += C[a, b, e] * Dinv[e, c]
+                    A[a, b, c] = s
         for p in range(ptr[i], ptr[i + 1]):
             for a in range(dim):
                 for b in range(dim):
                     s = 0.0
                     for c in range(dim):
-                        Ac = 0.0
-                        for e in range(dim):
-                            Ac += C[a, b, e] * Dinv[e, c]
-                        s += Ac * dx[p, c]
+                        s += A[a, b, c] * dx[p, c]
                     Hc[p, a, b] -= vol_k[p] * s
 
 
