@@ -43,7 +43,8 @@ def find_pairs(positions: np.ndarray, support: np.ndarray, gid: np.ndarray, rows
     tree = cKDTree(positions)
     pairs = tree.query_pairs(r=float(support.max()), output_type="ndarray").astype(np.int64)
     i, j = pairs[:, 0], pairs[:, 1]
-    dist = np.linalg.norm(positions[j] - positions[i], axis=1)
+    sep = positions[j] - positions[i]
+    dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
     keep = dist < 0.5 * (support[i] + support[j])
     i, j = i[keep], j[keep]
     i, j = np.concatenate([i, j]), np.concatenate([j, i])

@@ -16,7 +16,7 @@ CASES = {
     "rubber_pull": (["--set", "time.max_steps=30", "--set", "parameters.l0=1.3333333333333333e-4"], (1, 2)),
     "cylinder_bending": (["--set", "time.max_steps=15", "--set", "geometry.parts.0.spacing=0.16"], (1, 2, 3)),
     # updated reference: ownership re-decided, particles migrate, ghosts found anew
-    "bar1d_ul": (["--set", "time.max_steps=60"], (1, 2, 3)),
+    "bar1d_ul": (["--set", "time.max_steps=30"], (1, 2, 3)),
     "rings": (["--set", "time.max_steps=40", "--set", "parameters.spacing=4e-3",
                "--set", "initial.0.value=[-50.0, 0.0]"], (1, 2, 3)),
     "cylinder_bending_ul": (["--set", "time.max_steps=12", "--set", "geometry.parts.0.spacing=0.16"], (1, 3)),

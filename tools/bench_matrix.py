@@ -4,7 +4,9 @@
 Problems: the beam of [G §4.2] (compliance against Euler-Bernoulli, C = 53657 N/m) and the
 1D bar of [V §3.3.1] (tip displacement over two periods against the Fourier series).
 Variants: total-Lagrangian SPH with alpha = 0, alpha = 50 (paper form) and alpha = 50
-(variational form). For every case it records the error, the wall time of the time loop
+(variational form) on both problems; on the bar also Hessian's-difference stabilisation
+(eta = 0.3) and the updated-Lagrangian formulation with the reference updated every 3
+steps, without and with eta = 0.3 [V §3.3-3.4]. For every case it records the error, the wall time of the time loop
 (set-up and compilation excluded), microseconds per particle-step and the bytes of solver
 arrays per particle; it fits convergence rates and writes a table (CSV, JSON) and plots:
 error against wall time (work-precision), error against resolution, throughput.
@@ -36,8 +38,16 @@ from physics import simulation  # noqa: E402
 from parsph.analytic import bar_tip_displacement, cantilever_stiffness  # noqa: E402
 from parsph.errors import ParsphError  # noqa: E402
 
-VARIANTS = {"TL a=0": (0.0, "paper"), "TL a=50 paper": (50.0, "paper"),
-            "TL a=50 variational": (50.0, "variational")}
+UL3 = ["formulation.type='ulsph'", "formulation.update_every=3"]
+VARIANTS = {  # name: (overrides, problems)
+    "TL a=0": (["formulation.hourglass=0"], ("beam", "bar")),
+    "TL a=50 paper": (["formulation.hourglass=50", "formulation.hourglass_form='paper'"], ("beam",)),
+    "TL a=50 variational": (["formulation.hourglass=50", "formulation.hourglass_form='variational'"],
+                            ("beam",)),
+    "TL eta=0.3": (["formulation.hessian=0.3"], ("bar",)),
+    "UL3 eta=0": (UL3, ("bar",)),
+    "UL3 eta=0.3": (UL3 + ["formulation.hessian=0.3"], ("bar",)),
+}
 PRESETS = {"quick": {"beam": (4, 8), "bar": (40, 80, 160)},
            "full": {"beam": (4, 8, 16, 32), "bar": (40, 80, 160, 320, 640)}}
 
@@ -57,18 +67,16 @@ def timed_run(sim, end, probe=None, every=1):
     return time.perf_counter() - start, np.array(times), np.array(values)
 
 
-def beam_case(n, alpha, form):
-    sim = simulation("beam_bending", [f"parameters.n={n}", f"formulation.hourglass={alpha}",
-                                      f'formulation.hourglass_form="{form}"'])
+def beam_case(n, overrides):
+    sim = simulation("beam_bending", [f"parameters.n={n}"] + overrides)
     seconds, _, _ = timed_run(sim, sim.scene["time"]["end"])
     reaction = -sim.reaction()[sim.group_index("tip"), 1].sum() / 1e-4
     exact = cantilever_stiffness(100e9, 0.3, 8e-3, 1e-3, 1e-3)
     return sim, seconds, abs(reaction / exact - 1), n
 
 
-def bar_case(particles, alpha, form):
-    sim = simulation("bar1d", [f"geometry.parts.0.spacing={1.0 / (particles - 1)!r}",
-                               f"formulation.hourglass={alpha}", f'formulation.hourglass_form="{form}"'])
+def bar_case(particles, overrides):
+    sim = simulation("bar1d", [f"geometry.parts.0.spacing={1.0 / (particles - 1)!r}"] + overrides)
     tip = int(np.argmax(sim.X[:, 0]))
     c = np.sqrt(200e9 / 7850)
     seconds, t, u = timed_run(sim, 8.0 / c, probe=lambda s: s.u[tip, 0], every=5)
@@ -79,11 +87,11 @@ def bar_case(particles, alpha, form):
 def accuracy(preset: str, out: str) -> None:
     rows = []
     for problem, maker in (("beam", beam_case), ("bar", bar_case)):
-        for variant, (alpha, form) in VARIANTS.items():
-            if problem == "bar" and alpha > 0:
-                continue  # no hourglass modes to control in 1D
+        for variant, (overrides, problems) in VARIANTS.items():
+            if problem not in problems:
+                continue
             for resolution in PRESETS[preset][problem]:
-                sim, seconds, error, res = maker(resolution, alpha, form)
+                sim, seconds, error, res = maker(resolution, overrides)
                 n = sim.n_owned
                 rows.append({"problem": problem, "variant": variant, "resolution": res, "particles": n,
                              "steps": sim.step_count, "error": error, "seconds": seconds,

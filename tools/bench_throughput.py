@@ -1,10 +1,14 @@
 #!/usr/bin/env python3
-"""Throughput of the total-Lagrangian step on one core: microseconds per particle-step.
+"""Throughput of the Lagrangian step on one core: microseconds per particle-step.
 
 Elastic blocks in 2D and 3D (Saint Venant-Kirchhoff, cubic lattice, kernel radius 2.01 x
-spacing as in MACHDYN examples), hourglass control off and on (alpha = 50), stepped from
-a small random velocity field. Compile time and set-up are excluded; each case is timed
-over --steps steps after a warm-up. Prints a table and writes it as JSON.
+spacing as in MACHDYN examples), stepped from a small random velocity field, in the
+formulations: total-Lagrangian with hourglass control off and on (alpha = 50, both forms),
+with Hessian's-difference stabilisation (eta = 1), and updated-Lagrangian with eta = 1 and
+the reference updated every 3 steps (the paper's stress setting) or every 30. Each row
+also gives the time of one reference update per particle. Compile time and set-up are
+excluded; each case is timed over --steps steps after a warm-up. Prints a table and writes
+it as JSON.
 
 usage: tools/bench_throughput.py [--particles-2d 40000] [--particles-3d 27000] [--steps 200]
 """
@@ -28,7 +32,7 @@ from parsph.parallel.decomposition import distribute  # noqa: E402
 from parsph.solver import Simulation  # noqa: E402
 
 
-def block(dim: int, particles: int, alpha: float, form: str) -> dict:
+def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0) -> dict:
     side = round(particles ** (1 / dim))
     spacing = 1.0 / side
     raw = {
@@ -38,14 +42,15 @@ def block(dim: int, particles: int, alpha: float, form: str) -> dict:
         "kernel": {"type": "cubic_spline", "support": 2.01},
         "material": {"model": "saint_venant_kirchhoff", "density": 1000.0, "youngs_modulus": 1e9,
                      "poisson_ratio": 0.3},
-        "formulation": {"hourglass": alpha, "hourglass_form": form},
+        "formulation": {"hourglass": alpha, "hourglass_form": form, "hessian": eta,
+                        "type": "ulsph" if every else "tlsph", "update_every": every},
         "time": {"end": 1.0},
     }
     return config.validate(raw)
 
 
-def measure(dim, particles, alpha, form, steps):
-    scene = block(dim, particles, alpha, form)
+def measure(dim, particles, alpha, form, steps, eta=0.0, every=0):
+    scene = block(dim, particles, alpha, form, eta, every)
     sim = Simulation(scene, distribute(build_body(scene), MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
@@ -57,9 +62,11 @@ def measure(dim, particles, alpha, form, steps):
     seconds = time.perf_counter() - start
     n = sim.n_owned
     pairs = int(sim.ref.ptr[-1])
+    update = sim.stage_seconds.get("reference update", 0.0) / max(sim.updates, 1)
     return {"dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
-            "hourglass_form": form if alpha > 0 else "-", "steps": steps,
-            "us_per_particle_step": 1e6 * seconds / (steps * n)}
+            "hourglass_form": form if alpha > 0 else "-", "eta": eta, "update_every": every,
+            "steps": steps, "us_per_particle_step": 1e6 * seconds / (steps * n),
+            "us_per_particle_update": 1e6 * update / n}
 
 
 def main():
@@ -71,12 +78,17 @@ def main():
     args = ap.parse_args()
     rows = []
     for dim, count in ((2, args.particles_2d), (3, args.particles_3d)):
-        for alpha, form in ((0.0, "variational"), (50.0, "paper"), (50.0, "variational")):
-            rows.append(measure(dim, count, alpha, form, args.steps))
+        for alpha, form, eta, every in ((0.0, "variational", 0.0, 0), (50.0, "paper", 0.0, 0),
+                                        (50.0, "variational", 0.0, 0), (0.0, "variational", 1.0, 0),
+                                        (0.0, "variational", 1.0, 3), (0.0, "variational", 1.0, 30)):
+            rows.append(measure(dim, count, alpha, form, args.steps, eta, every))
             r = rows[-1]
-            print(f"{r['dim']}D  {r['particles']:7d} particles  {r['neighbours']:5.1f} neighbours  "
-                  f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s}  "
-                  f"{r['us_per_particle_step']:.3f} us/particle-step", flush=True)
+            kind = f"UL every {every:2d}" if every else "TL         "
+            print(f"{r['dim']}D  {r['particles']:7d} particles  {r['neighbours']:5.1f} neighbours  {kind} "
+                  f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s} eta {eta:3.1f}  "
+                  f"{r['us_per_particle_step']:.3f} us/particle-step"
+                  + (f"  (an update {r['us_per_particle_update']:.2f} us/particle)" if every else ""),
+                  flush=True)
     os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
     with open(args.json, "w") as fh:
         json.dump(rows, fh, indent=2)

@@ -20,7 +20,7 @@ import numpy as np
 
 from parsph.errors import ParsphError
 from parsph.formulations import tlsph
-from parsph.kernels.correction import reference_pairs, reverse_index
+from parsph.kernels.correction import reference_pairs
 from parsph.kernels.hessian import corrected_hessians
 from parsph.neighbors import find_pairs
 
@@ -78,9 +78,9 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         hvec = 0.5 * support[: n_rows]
         row_all = pairs.row_of_pair()
         Hc = corrected_hessians(pairs, ref.dx, ref.h, measure, gid, kernel)
-        q_all = eta * hvec[row_all, None] * Hc.sum(axis=2)
-        gh_all = eta * hvec[row_all] * ref.g.sum(axis=1)
-        rev = reverse_index(pairs, len(X))[:end]
+        q_all = eta * hvec[row_all, None] * np.einsum("pab->pa", Hc)
+        gh_all = eta * hvec[row_all] * np.einsum("pa->p", ref.g)
+        rev = ref.rev[:end]
         q, gh = np.ascontiguousarray(q_all[:end]), np.ascontiguousarray(gh_all[:end])
         q_rev, gh_rev = np.ascontiguousarray(_reverse(q_all, rev)), np.ascontiguousarray(_reverse(gh_all, rev))
         q_sum = np.stack([np.bincount(rows, q[:, a], n) for a in range(dim)], axis=1)
@@ -93,8 +93,8 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     if eta > 0 and end:
         # the stabilised gradient g + q - gh (sum g) against g, row by row: the fastest mode's
         # frequency grows about with the square root of this (measured: bar, cylinder, punch)
-        size_g = np.bincount(rows, np.linalg.norm(ref.g[:end], axis=1), n)
-        size_q = np.bincount(rows, np.linalg.norm(q, axis=1), n)
+        size_g = np.bincount(rows, np.sqrt(np.einsum("pa,pa->p", ref.g[:end], ref.g[:end])), n)
+        size_q = np.bincount(rows, np.sqrt(np.einsum("pa,pa->p", q, q)), n)
         size_gh = np.bincount(rows, np.abs(gh), n)
         has_g = size_g > 0
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]

@@ -39,6 +39,7 @@ class ReferencePairs:
     g_rev: np.ndarray  # (npairs, d) g_ji: the same pair seen from j
     g_sum: np.ndarray  # (rows, d) sum_j g_ij
     condition: np.ndarray  # (rows,) condition number of L_i
+    rev: np.ndarray  # (npairs,) index of the pair (j, i), -1 if j has no row
 
 
 @njit(cache=True)
@@ -92,7 +93,7 @@ def reference_pairs(
     rows = pairs.rows
     row = pairs.row_of_pair()
     dx = positions[pairs.idx] - positions[row]
-    dist = np.linalg.norm(dx, axis=1)
+    dist = np.sqrt(np.einsum("pa,pa->p", dx, dx))
     if len(dist) and not dist.min() > 0.0:
         p = int(np.argmin(dist))
         where = ", ".join(f"{c:.6g}" for c in positions[row[p]])
@@ -122,4 +123,5 @@ def reference_pairs(
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
     rev = reverse_index(pairs, len(positions))
     g_rev = np.where((rev >= 0)[:, None], g[np.maximum(rev, 0)], np.nan)
-    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition)
+    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
+                          rev=rev)

@@ -65,7 +65,7 @@ def corrected_hessians(pairs, dx, h_pair, measure, gid, kernel: str) -> np.ndarr
     """(npairs, d, d): V_k times the linearly corrected kernel Hessian for every pair of
     `pairs` (dx = x_k - x_i, pair supports h_pair, d-dimensional volumes `measure`)."""
     dim = dx.shape[1]
-    dist = np.linalg.norm(dx, axis=1)
+    dist = np.sqrt(np.einsum("pa,pa->p", dx, dx))
     _, dwdr, d2w = evaluate(kernel, dist, h_pair, dim)
     Hc = np.empty((len(dx), dim, dim))
     bad = np.zeros(pairs.rows, bool)
