@@ -6,13 +6,15 @@ Problems: the beam of [G §4.2] (compliance against Euler-Bernoulli, C = 53657 N
 Variants: total-Lagrangian SPH with alpha = 0, alpha = 50 (paper form) and alpha = 50
 (variational form) on both problems; on the bar also Hessian's-difference stabilisation
 (eta = 0.3) and the updated-Lagrangian formulation with the reference updated every 3
-steps, without and with eta = 0.3 [V §3.3-3.4]. For every case it records the error, the wall time of the time loop
+steps, without and with eta = 0.3 [V §3.3-3.4]; on the beam the updated formulation with
+eta = 0.3 and an update every 30 steps. For every case it records the error, the wall time of the time loop
 (set-up and compilation excluded), microseconds per particle-step and the bytes of solver
 arrays per particle; it fits convergence rates and writes a table (CSV, JSON) and plots:
 error against wall time (work-precision), error against resolution, throughput.
 
 The `stress` preset runs stability stress tests instead: the random patch for 1000
-periods, a block spinning at high speed, the rubber strip pulled to 500 %, recording
+periods, the random patch with its reference updated every step (20 periods, with and
+without stabilisation), a block spinning at high speed, the rubber strip pulled to 500 %, recording
 whether and when a run fails and how its disorder and hourglass energy grow (energies
 relative to the largest kinetic + strain energy of the run).
 
@@ -44,6 +46,8 @@ VARIANTS = {  # name: (overrides, problems)
     "TL a=50 paper": (["formulation.hourglass=50", "formulation.hourglass_form='paper'"], ("beam",)),
     "TL a=50 variational": (["formulation.hourglass=50", "formulation.hourglass_form='variational'"],
                             ("beam",)),
+    "UL30 eta=0.3": (["formulation.type='ulsph'", "formulation.update_every=30", "formulation.hourglass=0",
+                      "formulation.hessian=0.3"], ("beam",)),
     "TL eta=0.3": (["formulation.hessian=0.3"], ("bar",)),
     "UL3 eta=0": (UL3, ("bar",)),
     "UL3 eta=0.3": (UL3 + ["formulation.hessian=0.3"], ("bar",)),
@@ -116,17 +120,24 @@ def accuracy(preset: str, out: str) -> None:
     plot(rows, out)
 
 
-def stress(out: str) -> None:
+def stress(out: str, only: str = "") -> None:
     cases = [
         ("patch alpha=0, 1000 periods", "patch_random", ["formulation.hourglass=0"], 1550.0),
         ("patch alpha=50 variational, 1000 periods", "patch_random", [], 1550.0),
         ("patch alpha=50 paper, 1000 periods", "patch_random", ['formulation.hourglass_form="paper"'], 1550.0),
         ("rubber pull to 500 %, coarse", "rubber_pull", ["parameters.l0=1.3333333333333333e-4"], 5.0e-4),
+        ("patch UL every step, no stabilisation, 20 periods", "patch_random",
+         ["formulation.type='ulsph'", "formulation.update_every=1", "formulation.hourglass=0"], 31.0),
+        ("patch UL every step, eta=0.3, 20 periods", "patch_random",
+         ["formulation.type='ulsph'", "formulation.update_every=1", "formulation.hourglass=0",
+          "formulation.hessian=0.3"], 31.0),
+        ("patch UL every step, alpha=50, 20 periods", "patch_random",
+         ["formulation.type='ulsph'", "formulation.update_every=1"], 31.0),
     ]
     spin = ("spin at 0.3 x wave speed, 50 turns", "patch_random",
             ["formulation.hourglass=50", "time.end=1.0"], None)
     rows = []
-    for name, scene, overrides, end in cases + [spin]:
+    for name, scene, overrides, end in [c for c in cases + [spin] if only in c[0]]:
         sim = simulation(scene, overrides)
         if end is None:  # rigid spin: surface speed 0.3 c about the centre
             omega = 0.3 * sim.constants.wave_speed / 0.5
@@ -201,10 +212,11 @@ def plot(rows, out):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", choices=("quick", "full", "stress"), default="quick")
+    ap.add_argument("--only", default="", help="stress preset: only the cases whose name contains this")
     ap.add_argument("--out", default="results/bench_matrix")
     args = ap.parse_args()
     if args.preset == "stress":
-        stress(os.path.join(args.out, "stress"))
+        stress(os.path.join(args.out, "stress"), args.only)
     else:
         accuracy(args.preset, os.path.join(args.out, args.preset))
 
