@@ -18,7 +18,10 @@ without stabilisation), a block spinning at high speed, the rubber strip pulled 
 whether and when a run fails and how its disorder and hourglass energy grow (energies
 relative to the largest kinetic + strain energy of the run).
 
-usage: tools/bench_matrix.py [--preset quick|full|stress] [--out results/bench_matrix]
+The ranks are a dimension of the matrix: run the script under `mpiexec -n R` and every case
+runs decomposed over R ranks (rank 0 reports; results go to OUT/PRESET_rR).
+
+usage: [mpiexec -n R] tools/bench_matrix.py [--preset quick|full|stress] [--out results/bench_matrix]
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
+from mpi4py import MPI  # noqa: E402
 from physics import simulation  # noqa: E402
 
 from parsph.analytic import bar_tip_displacement, cantilever_stiffness  # noqa: E402
@@ -56,8 +60,17 @@ PRESETS = {"quick": {"beam": (4, 8), "bar": (40, 80, 160)},
            "full": {"beam": (4, 8, 16, 32), "bar": (40, 80, 160, 320, 640)}}
 
 
+COMM = MPI.COMM_WORLD
+
+
+def say(text: str) -> None:
+    if COMM.rank == 0:
+        print(text, flush=True)
+
+
 def solver_bytes(sim) -> int:
-    return sum(v.nbytes for v in vars(sim).values() if isinstance(v, np.ndarray))
+    """Bytes of solver arrays over all ranks (ghost copies included)."""
+    return COMM.allreduce(sum(v.nbytes for v in vars(sim).values() if isinstance(v, np.ndarray)))
 
 
 def timed_run(sim, end, probe=None, every=1):
@@ -68,22 +81,25 @@ def timed_run(sim, end, probe=None, every=1):
         if probe is not None and sim.step_count % every == 0:
             values.append(probe(sim))
             times.append(sim.t)
-    return time.perf_counter() - start, np.array(times), np.array(values)
+    return COMM.allreduce(time.perf_counter() - start, op=MPI.MAX), np.array(times), np.array(values)
 
 
 def beam_case(n, overrides):
-    sim = simulation("beam_bending", [f"parameters.n={n}"] + overrides)
+    sim = simulation("beam_bending", [f"parameters.n={n}"] + overrides, comm=COMM)
     seconds, _, _ = timed_run(sim, sim.scene["time"]["end"])
-    reaction = -sim.reaction()[sim.group_index("tip"), 1].sum() / 1e-4
+    reaction = -COMM.allreduce(sim.reaction()[sim.group_index("tip"), 1].sum()) / 1e-4
     exact = cantilever_stiffness(100e9, 0.3, 8e-3, 1e-3, 1e-3)
     return sim, seconds, abs(reaction / exact - 1), n
 
 
 def bar_case(particles, overrides):
-    sim = simulation("bar1d", [f"geometry.parts.0.spacing={1.0 / (particles - 1)!r}"] + overrides)
-    tip = int(np.argmax(sim.X[:, 0]))
+    sim = simulation("bar1d", [f"geometry.parts.0.spacing={1.0 / (particles - 1)!r}"] + overrides, comm=COMM)
     c = np.sqrt(200e9 / 7850)
-    seconds, t, u = timed_run(sim, 8.0 / c, probe=lambda s: s.u[tip, 0], every=5)
+
+    def tip(s):  # the free end B, wherever it is owned
+        return COMM.allreduce(float(s.u[s.group_index("B"), 0].sum()))
+
+    seconds, t, u = timed_run(sim, 8.0 / c, probe=tip, every=5)
     exact = bar_tip_displacement(t, 1.0, c, 5.0)
     return sim, seconds, np.linalg.norm(u - exact) / np.linalg.norm(exact), particles
 
@@ -96,15 +112,16 @@ def accuracy(preset: str, out: str) -> None:
                 continue
             for resolution in PRESETS[preset][problem]:
                 sim, seconds, error, res = maker(resolution, overrides)
-                n = sim.n_owned
-                rows.append({"problem": problem, "variant": variant, "resolution": res, "particles": n,
+                n = sim.decomp.total
+                rows.append({"problem": problem, "variant": variant, "ranks": COMM.size, "resolution": res,
+                             "particles": n,
                              "steps": sim.step_count, "error": error, "seconds": seconds,
-                             "us_per_particle_step": 1e6 * seconds / (n * sim.step_count),
+                             "us_per_particle_step": 1e6 * seconds * COMM.size / (n * sim.step_count),
                              "bytes_per_particle": solver_bytes(sim) / n})
                 r = rows[-1]
-                print(f"{problem:5s} {variant:20s} res {res:4d}  N {n:6d}  error {error:.3e}  "
-                      f"{seconds:7.2f} s  {r['us_per_particle_step']:.3f} us/p-step  "
-                      f"{r['bytes_per_particle']:.0f} B/particle", flush=True)
+                say(f"{problem:5s} {variant:20s} res {res:4d}  N {n:6d}  error {error:.3e}  "
+                    f"{seconds:7.2f} s  {r['us_per_particle_step']:.3f} us/p-step (x {COMM.size} rank(s))  "
+                    f"{r['bytes_per_particle']:.0f} B/particle")
     rates = {}
     for problem in ("beam", "bar"):
         for variant in VARIANTS:
@@ -113,11 +130,12 @@ def accuracy(preset: str, out: str) -> None:
                 x = np.log([r["resolution"] for r in sel])
                 y = np.log([r["error"] for r in sel])
                 rates[f"{problem} {variant}"] = float(np.polyfit(x, y, 1)[0])
-    print("fitted convergence rates (slope of log error vs log resolution):")
+    say("fitted convergence rates (slope of log error vs log resolution):")
     for k, v in rates.items():
-        print(f"  {k:28s} {v:6.2f}")
-    write(rows, {"rates": rates}, out)
-    plot(rows, out)
+        say(f"  {k:28s} {v:6.2f}")
+    if COMM.rank == 0:
+        write(rows, {"rates": rates}, out)
+        plot(rows, out)
 
 
 def stress(out: str, only: str = "") -> None:
@@ -201,7 +219,8 @@ def plot(rows, out):
                              marker=marker, label=label)
     axes[0].set(xlabel="wall time of the time loop [s]", ylabel="relative error", title="work-precision")
     axes[1].set(xlabel="resolution (beam: n, bar: particles)", ylabel="relative error", title="convergence")
-    axes[2].set(xlabel="particles", ylabel="µs per particle-step", title="throughput (1 core)")
+    axes[2].set(xlabel="particles", ylabel="µs per particle-step x ranks",
+                title=f"throughput ({COMM.size} rank(s))")
     for ax in axes:
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
@@ -216,9 +235,11 @@ def main():
     ap.add_argument("--out", default="results/bench_matrix")
     args = ap.parse_args()
     if args.preset == "stress":
+        if COMM.size > 1:
+            sys.exit("the stress preset runs on one rank")
         stress(os.path.join(args.out, "stress"), args.only)
     else:
-        accuracy(args.preset, os.path.join(args.out, args.preset))
+        accuracy(args.preset, os.path.join(args.out, args.preset + (f"_r{COMM.size}" if COMM.size > 1 else "")))
 
 
 if __name__ == "__main__":
