@@ -244,3 +244,21 @@ def test_ring_bounces_off_the_symmetry_plane_like_total_lagrangian():
     assert np.abs(bulge_ul - bulge_tl).max() < 0.03 * bulge_tl.max()
     assert ul["spacing_ratio_min"].min() > 0.9 * ul["spacing_ratio_min"][0]  # as ordered as at the start
     assert tl["left_x"].min() == 0.0  # the wall held it
+
+
+@pytest.mark.parametrize("extra, message", [
+    ('[formulation]\nupdate_every = 3', "apply to formulation.type = 'ulsph' only"),
+    ('[[walls]]\npoint = [0.0, 0.0]\nnormal = [0.0, 0.0]', "walls[0].normal must not be zero"),
+    ('[[walls]]\npoint = [0.0, 0.0]\nnormal = [1.0, 0.0]\nlower = [0.0, 0.0]', "give both lower and upper"),
+    ('[[walls]]\npoint = [0.0, 0.0, 0.0]\nnormal = [1.0, 0.0]', "walls[0].point must have 2 components"),
+])
+def test_bad_update_and_wall_settings_are_refused(extra, message):
+    from parsph.errors import InputError
+
+    text = block_2d()
+    if extra.startswith("[formulation]"):
+        text = text.replace("[formulation]\n", extra + "\n", 1)
+    else:
+        text += "\n" + extra + "\n"
+    with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        simulation(text)
