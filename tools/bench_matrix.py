@@ -205,6 +205,7 @@ def plot(rows, out):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
     for problem, marker in (("beam", "o"), ("bar", "s")):
@@ -221,6 +222,7 @@ def plot(rows, out):
     axes[1].set(xlabel="resolution (beam: n, bar: particles)", ylabel="relative error", title="convergence")
     axes[2].set(xlabel="particles", ylabel="µs per particle-step x ranks",
                 title=f"throughput ({COMM.size} rank(s))")
+    axes[2].xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # no crowded minor labels
     for ax in axes:
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
