@@ -172,14 +172,14 @@ def punch(overrides):
 @pytest.mark.parametrize("over, lowest", [
     (["formulation.hourglass=50"], 0.75),  # measured 0.85
     (["formulation.hourglass=0", "formulation.hessian=1.4"], 0.65),  # measured 0.72
-    (UL + ["formulation.update_strain=0.5"], 0.6),  # measured 0.69 with 12 updates
 ])
 def test_punch_reaches_half_compression_with_ordered_particles(over, lowest):
-    sim, depth, ordered = punch(over)
+    """Total-Lagrangian with hourglass control or Hessian stabilisation. (With an updated
+    reference the punch disorders: see README, Known gaps; the spacing ratio, normalised by
+    F, does not see that disorder because F^r absorbs it.)"""
+    _, depth, ordered = punch(over)
     assert depth == pytest.approx(5e-3, rel=1e-3)
     assert ordered > lowest
-    if sim.updated:
-        assert 5 <= sim.updates <= 30
 
 
 def test_punch_without_stabilisation_disorders():
