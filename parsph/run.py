@@ -118,6 +118,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
     out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
     from parsph.build import Body, build_body
     from parsph.parallel.decomposition import distribute
+    from parsph.solver import REFERENCE_STATE
 
     if restart is None:
         previous = check_output(out_dir, overwrite)
@@ -135,7 +136,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
         groups = {name: data["groups"][:, k].astype(bool) for k, name in enumerate(data["group_names"])}
         body = Body(X=data["X"], measure=data["measure"], volume=data["volume"], mass=data["mass"],
                     support=data["support"], groups=groups)
-        state = {k: data[k] for k in ("u", "v", "Xr", "Fr", "measure_r", "volume_r") if k in data}
+        state = {k: data[k] for k in ("u", "v") + REFERENCE_STATE if k in data}
     say(f"parsph: restarting from {path} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
     return scene, out_dir, [], distribute(body, COMM, state), data
 

@@ -31,8 +31,6 @@ from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, 
 from parsph.parallel.runtime import collective
 from parsph.walls import Walls
 
-# per-particle arrays that travel with a particle when it changes owner
-CARRIED = ("gid", "X", "measure", "volume", "mass", "support", "groups", "u", "v")
 REFERENCE_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
 
 
@@ -149,14 +147,12 @@ class Simulation:
         formulations.tlsph.stable_time_step (or the fixed dt), the strain for the adaptive
         reference update (0 unless it is enabled)."""
         settings = self.scene["time"]
-        n = self.n_owned
         local = np.zeros(2)
-        if settings["dt"] == 0:
-            local[0] = -tlsph.stable_time_step(n, self.fs, self.F, self.J, self.ref.min_spacing,
-                                               self.ref.stiffening, self._omega_hg2, self.constants.wave_speed, self.model,
-                                               self.dim)
-        if self.updated and self.update_strain > 0:
-            local[1] = tlsph.incremental_strain(n, self.fs, self.dim)
+        if settings["dt"] == 0 or (self.updated and self.update_strain > 0):
+            dt, strain = tlsph.stable_time_step(
+                self.n_owned, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
+                self._omega_hg2, self.constants.wave_speed, self.model, self.dim)
+            local[:] = -dt, strain
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MAX)
         if settings["dt"] > 0:
@@ -286,11 +282,8 @@ class Simulation:
         in X^r, rebuild the corrections and evaluate the forces in the new reference."""
         start = time.perf_counter()
         n = self.n_owned
-        owned = {"gid": self.gid[:n], "X": self.X[:n], "measure": self.measure[:n],
-                 "volume": self.volume[:n], "mass": self.mass[:n], "support": self.support[:n],
-                 "groups": self._group_matrix(), "u": self.u[:n], "v": self.v[:n],
-                 "Xr": self.X[:n] + self.u[:n], "Fr": self.F[:n].copy(),
-                 "measure_r": self.J[:n] * self.measure[:n], "volume_r": self.J[:n] * self.volume[:n]}
+        owned = dict(self._owned_fields(), gid=self.gid[:n], Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
+                     measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
         if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
             self.hourglass_released_local += self.hourglass_energy_local  # the penalty restarts at 0
         dest = np.full(n, self.comm.rank, np.int64)
@@ -315,11 +308,14 @@ class Simulation:
         self.updates += 1
         self.since_update = 0
 
-    def _group_matrix(self) -> np.ndarray:
+    def _owned_fields(self) -> dict:
+        """The owned particles' reference data and state, as migrated and checkpointed."""
         n = self.n_owned
-        if not self.group_names:
-            return np.zeros((n, 0), np.uint8)
-        return np.stack([self.groups[k] for k in self.group_names], axis=1).astype(np.uint8)
+        groups = (np.stack([self.groups[k] for k in self.group_names], axis=1).astype(np.uint8)
+                  if self.group_names else np.zeros((n, 0), np.uint8))
+        return {"X": self.X[:n], "measure": self.measure[:n], "volume": self.volume[:n],
+                "mass": self.mass[:n], "support": self.support[:n], "groups": groups,
+                "u": self.u[:n], "v": self.v[:n]}
 
     @property
     def dt(self) -> float:
@@ -333,12 +329,9 @@ class Simulation:
         totals = np.array(self.comm.allgather((
             self.hourglass_energy_local if self.hourglass_form == tlsph.HOURGLASS_PAPER else 0.0,
             self.hourglass_released_local, self.external_work_local))).sum(axis=0)
-        fields = {"X": self.X[:n], "measure": self.measure[:n], "volume": self.volume[:n],
-                  "mass": self.mass[:n], "support": self.support[:n], "u": self.u[:n], "v": self.v[:n],
-                  "groups": self._group_matrix()}
+        fields = self._owned_fields()
         if self.updated:
-            fields.update(Xr=self.Xr[:n], Fr=self.Fr[:n], measure_r=self.measure_r[:n],
-                          volume_r=self.volume_r[:n])
+            fields.update({k: getattr(self, k)[:n] for k in REFERENCE_STATE})
         return {
             "fields": fields, "group_names": self.group_names,
             "totals": {"hourglass_work": float(totals[0]), "hourglass_released": float(totals[1]),

@@ -195,21 +195,26 @@ def test_ulsph_without_a_trigger_is_refused():
         simulation(block_2d(), UL)
 
 
+TL = ["formulation.type='tlsph'", "formulation.update_every=0"]  # a UL scene run total-Lagrangian
+
+
+def runs_of(scene, base, end, every, *variants):
+    """[(history rows, Simulation)] of `scene` with overrides `base` + each variant."""
+    out = []
+    for over in variants:
+        sim = simulation(scene, base + over)
+        out.append((run_until(sim, end, every=every), sim))
+    return out
+
+
 @pytest.mark.slow
 def test_cylinder_with_updates_every_3_steps_or_adaptive_tracks_total_lagrangian():
     """[V §4.1, Fig. 17] on a coarser cylinder: updated every 3 steps with eta = 1.5, the
     largest x-displacement history follows the total-Lagrangian run with the same
     stabilisation; the adaptive trigger gets the same answer with far fewer updates."""
-    coarse = ["geometry.parts.0.spacing=0.107", "time.end=1.3"]
-
-    def swing(over):
-        sim = simulation("cylinder_bending_ul", coarse + over)
-        rows = run_until(sim, 1.3, every=10)
-        return rows, sim
-
-    tl, _ = swing(["formulation.type='tlsph'", "formulation.update_every=0"])
-    every3, sim3 = swing([])
-    adaptive, sim_a = swing(["formulation.update_every=0", "formulation.update_strain=0.05"])
+    (tl, _), (every3, sim3), (adaptive, sim_a) = runs_of(
+        "cylinder_bending_ul", ["geometry.parts.0.spacing=0.107", "time.end=1.3"], 1.3, 10,
+        TL, [], ["formulation.update_every=0", "formulation.update_strain=0.05"])
 
     def distance(rows, ref):
         y = ref["max_displacement_x"]
@@ -228,15 +233,7 @@ def test_cylinder_with_updates_every_3_steps_or_adaptive_tracks_total_lagrangian
 def test_ring_bounces_off_the_symmetry_plane_like_total_lagrangian():
     """[V §4.2, Fig. 20]: updated every 3 steps with eta = 0.3, the ring's vertical bulge
     follows the total-Lagrangian run and no particle separates."""
-    coarse = ["parameters.spacing=4e-3", "time.end=0.03"]
-
-    def bounce(over):
-        sim = simulation("rings", coarse + over)
-        rows = run_until(sim, 0.03, every=20)
-        return rows, sim
-
-    tl, _ = bounce(["formulation.type='tlsph'", "formulation.update_every=0"])
-    ul, sim = bounce([])
+    (tl, _), (ul, sim) = runs_of("rings", ["parameters.spacing=4e-3", "time.end=0.03"], 0.03, 20, TL, [])
     assert sim.updates > 300
     bulge_tl = tl["top_y"] - tl["top_y"][0]
     bulge_ul = np.interp(tl["time"], ul["time"], ul["top_y"]) - tl["top_y"][0]

@@ -257,8 +257,7 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     sim.v[:n] = velocity_field(X, v0)
     # the step parsph's own CFL estimate would allow (cfl = 1), for the record
     stable = float(tlsph.stable_time_step(n, sim.fs, sim.F, sim.J, sim.ref.min_spacing, sim.ref.stiffening,
-                                          sim._omega_hg2,
-                                          sim.constants.wave_speed, sim.model, dim))
+                                          sim._omega_hg2, sim.constants.wave_speed, sim.model, dim)[0])
     for _ in range(warmup):
         sim.step()
     start = time.perf_counter()

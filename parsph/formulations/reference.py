@@ -20,7 +20,7 @@ import numpy as np
 
 from parsph.errors import ParsphError
 from parsph.formulations import tlsph
-from parsph.kernels.correction import reference_pairs
+from parsph.kernels.correction import reference_pairs, reverse_values
 from parsph.kernels.hessian import corrected_hessians
 from parsph.neighbors import find_pairs
 
@@ -45,12 +45,6 @@ class ReferenceData:
     gh_rev: np.ndarray
     min_spacing: np.ndarray  # nearest reference neighbour distance of each owned particle
     stiffening: np.ndarray  # how much the stabilisation stiffens each owned particle (>= 1)
-
-
-def _reverse(values, rev):
-    out = values[np.maximum(rev, 0)]
-    out[rev < 0] = np.nan
-    return out
 
 
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str,
@@ -82,7 +76,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         gh_all = eta * hvec[row_all] * np.einsum("pa->p", ref.g)
         rev = ref.rev[:end]
         q, gh = np.ascontiguousarray(q_all[:end]), np.ascontiguousarray(gh_all[:end])
-        q_rev, gh_rev = np.ascontiguousarray(_reverse(q_all, rev)), np.ascontiguousarray(_reverse(gh_all, rev))
+        q_rev, gh_rev = reverse_values(q_all, rev), reverse_values(gh_all, rev)
         q_sum = np.stack([np.bincount(rows, q[:, a], n) for a in range(dim)], axis=1)
     d2 = np.einsum("pa,pa->p", ref.dx[:end], ref.dx[:end])
     min_spacing = np.full(n, np.inf)

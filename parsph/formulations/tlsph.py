@@ -132,17 +132,23 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int, update
 
 
 @njit(cache=True, inline="always")
+def _gradient_row(dim, i, ptr, idx, g, d, f):
+    """f[i] = I + sum_j (d_j - d_i) (x) g_ij."""
+    for a in range(dim):
+        for b in range(dim):
+            f[i, a, b] = 1.0 if a == b else 0.0
+    for p in range(ptr[i], ptr[i + 1]):
+        j = idx[p]
+        for a in range(dim):
+            du = d[j, a] - d[i, a]
+            for b in range(dim):
+                f[i, a, b] += du * g[p, b]
+
+
+@njit(cache=True, inline="always")
 def _gradient(dim, n, ptr, idx, g, d, f):
     for i in range(n):
-        for a in range(dim):
-            for b in range(dim):
-                f[i, a, b] = 1.0 if a == b else 0.0
-        for p in range(ptr[i], ptr[i + 1]):
-            j = idx[p]
-            for a in range(dim):
-                du = d[j, a] - d[i, a]
-                for b in range(dim):
-                    f[i, a, b] += du * g[p, b]
+        _gradient_row(dim, i, ptr, idx, g, d, f)
 
 
 @njit(cache=True, inline="always")
@@ -169,15 +175,7 @@ def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, 
                     for b in range(dim):
                         fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
         else:
-            for a in range(dim):
-                for b in range(dim):
-                    fs[i, a, b] = 1.0 if a == b else 0.0
-            for p in range(ptr[i], ptr[i + 1]):
-                j = idx[p]
-                for a in range(dim):
-                    du = d[j, a] - d[i, a]
-                    for b in range(dim):
-                        fs[i, a, b] += du * g[p, b]
+            _gradient_row(dim, i, ptr, idx, g, d, fs)
         if updated:  # F = f F^r [V §3.1]
             for a in range(dim):
                 for b in range(dim):
@@ -368,39 +366,31 @@ def principal_stretches(F, dim):
 
 @njit(cache=True)
 def stable_time_step(n, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, model, dim):
-    """Largest stable step of the owned particles before the CFL factor:
+    """(largest stable step before the CFL factor, largest incremental log strain) of the
+    owned particles:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
     the motion from the reference fs (the current spacing shrinks with it), and c_i the
     reference P-wave speed times the law's stiffening under the total F:
     (3 s_max^2 - 1)/2 under stretch for Saint Venant-Kirchhoff, 1 - ln J under compression
-    for the neo-Hookean laws (their tangent moduli). In the total-Lagrangian formulation fs
-    and F are the same array."""
+    for the neo-Hookean laws (their tangent moduli), and sqrt(stab_i) for the stiffening by
+    Hessian stabilisation (formulations.reference). The strain max |ln s| over the
+    principal stretches of fs is the distortion measure of the adaptive reference update.
+    In the total-Lagrangian formulation fs and F are the same array. A flattened or
+    inverted particle gives (0, inf)."""
     dt = np.inf
+    worst = 0.0
     for i in range(n):
         s_min, s_max = principal_stretches(F[i], dim)
-        if fs is not F:
-            s_min = principal_stretches(fs[i], dim)[0]
+        f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim)
         if model == SAINT_VENANT_KIRCHHOFF:
             stiffening = max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
         else:
             stiffening = max(1.0, 1.0 - math.log(J[i])) if J[i] > 0 else np.inf
-        length = min_spacing[i] * min(1.0, s_min)
+        length = min_spacing[i] * min(1.0, f_min)
         if not (length > 0.0 and stiffening < np.inf):
-            return 0.0  # a flattened or inverted particle: no stable step
+            return 0.0, np.inf  # no stable step
+        worst = max(worst, math.log(f_max), -math.log(f_min))
         w_el = 2.0 * wave_speed * math.sqrt(stiffening * stab[i]) / length
         dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
-    return dt
-
-
-@njit(cache=True)
-def incremental_strain(n, fs, dim):
-    """Largest principal logarithmic strain |ln s| of the motion from the reference over
-    particles 0..n-1: the distortion measure of the adaptive reference update."""
-    worst = 0.0
-    for i in range(n):
-        s_min, s_max = principal_stretches(fs[i], dim)
-        if not s_min > 0.0:
-            return np.inf
-        worst = max(worst, math.log(s_max), -math.log(s_min))
-    return worst
+    return dt, worst

@@ -84,6 +84,13 @@ def reverse_index(pairs: Pairs, n: int) -> np.ndarray:
     return np.where(found, order[pos], -1)
 
 
+def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
+    """values of the reverse pairs (reverse_index), NaN where j has no row."""
+    out = values[np.maximum(rev, 0)]
+    out[rev < 0] = np.nan
+    return out
+
+
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
     pairs: Pairs, kernel: str,
@@ -122,6 +129,6 @@ def reference_pairs(
     g_sum = np.empty((rows, dim))
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
     rev = reverse_index(pairs, len(positions))
-    g_rev = np.where((rev >= 0)[:, None], g[np.maximum(rev, 0)], np.nan)
+    g_rev = reverse_values(g, rev)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
                           rev=rev)
