@@ -111,49 +111,41 @@ def report_stages(seconds: dict, steps: int, particles: int) -> None:
 
 
 def _setup(scene_path, out_dir, overrides, overwrite, restart):
-    """The scene, output directory, this rank's part of the particles and the checkpoint
-    data of a run. Rank 0 builds (or reads) the particle set and distributes it."""
+    """The scene, output directory, this rank's particles (with ghosts) and the checkpoint
+    data of a run. Every rank builds (or reads) a block of the particle set; the blocks are
+    partitioned among the ranks by position."""
     with collective():
         scene = config.load(scene_path, overrides)
     out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
-    from parsph.build import Body, build_body
-    from parsph.parallel.decomposition import distribute
-    from parsph.solver import REFERENCE_STATE
+    from parsph.build import build_local
+    from parsph.parallel.decomposition import add_ghosts, partition
 
     if restart is None:
         previous = check_output(out_dir, overwrite)
-        body = None
-        with collective():
-            if COMM.rank == 0:
-                body = build_body(scene)
-        return scene, out_dir, previous, distribute(body, COMM), None
-    path = checkpoint.choose(restart, out_dir)
-    data = checkpoint.load(path, COMM)
+        return scene, out_dir, previous, build_local(scene, COMM), None
+    data = checkpoint.load(restart, out_dir, COMM)
     with collective():
-        checkpoint.check_compatible(data["scene"], scene, path)
-    body, state = None, None
-    if COMM.rank == 0:
-        groups = {name: data["groups"][:, k].astype(bool) for k, name in enumerate(data["group_names"])}
-        body = Body(X=data["X"], measure=data["measure"], volume=data["volume"], mass=data["mass"],
-                    support=data["support"], groups=groups)
-        state = {k: data[k] for k in ("u", "v") + REFERENCE_STATE if k in data}
-    say(f"parsph: restarting from {path} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
-    return scene, out_dir, [], distribute(body, COMM, state), data
+        checkpoint.check_compatible(data["scene"], scene, data["path"])
+    fields = data.pop("fields")
+    position = "Xr" if "Xr" in fields else "X"
+    local = add_ghosts(partition(fields, position, COMM), position, COMM)
+    say(f"parsph: restarting from {data['path']} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
+    return scene, out_dir, [], local, data
 
 
 def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool,
         restart: str | None = None, debug: bool = False) -> int:
     """Run a scene (or continue it from a checkpoint); returns the exit code. `debug` checks
     at every history row that no particle was lost or duplicated."""
-    scene, out_dir, previous, body, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
+    scene, out_dir, previous, local, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
     from parsph.solver import Simulation
 
     name = scene["scene"]["name"]
     scene_json = config.to_json(scene)
     start = time.perf_counter()
-    count = body.total
-    sim = Simulation(scene, body, COMM, restart=data)
-    del body
+    count = local.total
+    sim = Simulation(scene, local, COMM, restart=data)
+    del local
     setup_seconds = time.perf_counter() - start
     if data is None:
         claim_output(out_dir, previous)

@@ -37,9 +37,9 @@ REFERENCE_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference
 class Simulation:
     """Lagrangian corrected SPH state and stepping for the particles this rank owns."""
 
-    def __init__(self, scene: dict, body: LocalBody, comm, restart: dict | None = None):
-        """Set up this rank's particles (parallel.decomposition.distribute); `restart`
-        (io.checkpoint.load, its particle state in body.fields) continues a run."""
+    def __init__(self, scene: dict, local: LocalBody, comm, restart: dict | None = None):
+        """Set up this rank's particles `local` (build.build_local, or a checkpoint's block
+        partitioned); `restart` (io.checkpoint.load: clock and totals) continues a run."""
         self.scene = scene
         self.comm = comm
         self.dim = dim = scene["scene"]["dimension"]
@@ -70,7 +70,7 @@ class Simulation:
         self.hourglass_energy_local = 0.0
         self.hourglass_released_local = 0.0  # penalty energy dropped at reference updates
         self.external_work_local = 0.0
-        self._adopt(body)
+        self._adopt(local)
         n = self.n_owned
         if restart is None:
             apply_initial_conditions(scene["initial"], self.groups, self.X[:n], self.u[:n], self.v[:n])

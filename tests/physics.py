@@ -8,8 +8,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import config
-from parsph.build import build_body
-from parsph.parallel.decomposition import distribute
+from parsph.build import build_local
 from parsph.solver import Simulation
 
 from conftest import RUNS
@@ -29,8 +28,7 @@ def scene_from(name_or_text: str, overrides=()) -> dict:
 
 def simulation(name_or_text: str, overrides=(), comm=MPI.COMM_SELF) -> Simulation:
     scene = scene_from(name_or_text, overrides)
-    body = build_body(scene) if comm.rank == 0 else None
-    return Simulation(scene, distribute(body, comm), comm)
+    return Simulation(scene, build_local(scene, comm), comm)
 
 
 def run_until(sim: Simulation, end: float, every: int = 1, probe=None) -> dict:

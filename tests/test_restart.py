@@ -127,27 +127,30 @@ def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
         assert f["time"][-1] >= 0.2
 
 
-def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path):
+@pytest.mark.parametrize("ranks", [1, pytest.param(3, marks=pytest.mark.mpi)])
+def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path, ranks):
+    """Each rank reads and checksums its own block of rows: a flipped byte in the last
+    particle's velocity (the last rank's block) is found and every rank refuses the file."""
     out = tmp_path / "run"
-    run(out, 1, "--set", "time.max_steps=30", "--set", "output.checkpoint_every=10",
+    run(out, ranks, "--set", "time.max_steps=30", "--set", "output.checkpoint_every=10",
         "--set", "output.checkpoint_keep=3")
     folder = out / "checkpoints"
     names = sorted(p.name for p in folder.glob("step_*.h5"))
     assert names == ["step_00000010.h5", "step_00000020.h5", "step_00000030.h5"]
-    # flip bytes inside the velocity data of the newest, truncate the second newest
+    # flip bytes inside the last velocity of the newest, truncate the second newest
     newest = folder / names[-1]
     with h5py.File(newest, "r") as f:
-        offset = f["v"].id.get_offset()
+        end = f["v"].id.get_offset() + f["v"].id.get_storage_size()
     data = bytearray(newest.read_bytes())
-    data[offset + 8: offset + 16] = b"\xff" * 8
+    data[end - 8: end] = b"\xff" * 8
     newest.write_bytes(bytes(data))
     middle = folder / names[-2]
     middle.write_bytes(middle.read_bytes()[:2000])
     for path, why in ((newest, "corrupted"), (middle, "cannot be opened")):
-        proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", path])
+        proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", path], ranks=ranks)
         assert proc.returncode == 2 and why in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.max_steps=40"])
+                   *PATCH, "--set", "time.max_steps=40"], ranks=ranks)
     assert proc.returncode == 0, proc.stderr
     assert "skipping checkpoint" in proc.stdout
     assert "step_00000010.h5" in proc.stdout.split("restarting from")[1].splitlines()[0]

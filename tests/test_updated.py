@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 
 from parsph.geometry import box
 from parsph.kernels.correction import reference_pairs

@@ -76,8 +76,7 @@ sys.path.insert(0, ROOT)
 from mpi4py import MPI  # noqa: E402
 
 from parsph import config  # noqa: E402
-from parsph.build import build_body  # noqa: E402
-from parsph.parallel.decomposition import distribute  # noqa: E402
+from parsph.build import build_local  # noqa: E402
 from parsph.formulations import tlsph  # noqa: E402
 from parsph.solver import Simulation  # noqa: E402
 
@@ -248,8 +247,7 @@ def scene(dim: int, side: int, alpha: float, form: str, dt: float, steps: int) -
 
 def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     sc = scene(dim, side, alpha, form, dt, warmup + steps)
-    body = build_body(sc)
-    sim = Simulation(sc, distribute(body, MPI.COMM_SELF), MPI.COMM_SELF)
+    sim = Simulation(sc, build_local(sc, MPI.COMM_SELF), MPI.COMM_SELF)
     n = sim.n_owned
     if not np.allclose(sim.volume[:n], (1.0 / side) ** dim, rtol=1e-12):
         sys.exit("parsph particle volumes are not uniform: not the lattice LAMMPS builds")

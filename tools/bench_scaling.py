@@ -3,8 +3,10 @@
 
 Default: a 60^3 = 216 000 particle cube (spiky kernel, support 2.01 spacings, Saint
 Venant-Kirchhoff, hourglass alpha = 50), stepped from a smooth velocity field with a fixed
-time step. Reports, per rank count, the wall time per step, the time per step spent in the
-ghost (halo) exchange and in the CFL reduction, the speed-up and the parallel efficiency.
+time step. Reports, per rank count, the time to generate and partition the particles
+(build_local: each rank generates its own block), the whole set-up, the wall time per
+step, the time per step spent in the ghost (halo) exchange, the speed-up and the parallel
+efficiency.
 The driver starts one MPI job per rank count (mpiexec) and runs them one after another.
 
 usage: tools/bench_scaling.py [--side 60] [--steps 50] [--ranks 1 2] [--json FILE]
@@ -29,8 +31,7 @@ def worker(side: int, steps: int) -> None:
     from mpi4py import MPI
 
     from parsph import config
-    from parsph.build import build_body
-    from parsph.parallel.decomposition import distribute
+    from parsph.build import build_local
     from parsph.solver import Simulation
 
     comm = MPI.COMM_WORLD
@@ -44,11 +45,14 @@ def worker(side: int, steps: int) -> None:
         "formulation": {"hourglass": 50.0, "hourglass_form": "paper"},
         "time": {"end": 1.0, "dt": 0.1 * spacing / 1160.0},
     })
-    setup = time.perf_counter()
-    body = build_body(scene) if comm.rank == 0 else None
-    sim = Simulation(scene, distribute(body, comm), comm)
-    del body
-    setup = time.perf_counter() - setup
+    comm.Barrier()
+    start = time.perf_counter()
+    local = build_local(scene, comm)
+    comm.Barrier()
+    build = time.perf_counter() - start
+    sim = Simulation(scene, local, comm)
+    del local
+    setup = time.perf_counter() - start
     n = sim.n_owned
     X = sim.X[:n]
     sim.v[:n] = 1e-3 * np.sin(np.pi * X) * np.cos(np.pi * X[:, ::-1])
@@ -65,7 +69,7 @@ def worker(side: int, steps: int) -> None:
     counts = comm.gather(n, root=0)
     if comm.rank == 0:
         print(json.dumps({"ranks": comm.size, "particles": int(sum(counts)), "owned": counts,
-                          "setup_s": setup, "step_ms": 1e3 * seconds / steps, "halo_ms": 1e3 * halo / steps,
+                          "build_s": build, "setup_s": setup, "step_ms": 1e3 * seconds / steps, "halo_ms": 1e3 * halo / steps,
                           "us_per_particle_step_core": 1e6 * seconds * comm.size / (steps * sum(counts))}))
 
 
@@ -91,12 +95,12 @@ def main() -> None:
             sys.exit(f"{ranks} rank(s) failed:\n{proc.stderr}")
         rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
     base = rows[0]["step_ms"] * rows[0]["ranks"]
-    print(f"{'ranks':>5} {'particles':>10} {'set-up s':>9} {'ms/step':>9} {'halo ms':>8} {'speed-up':>9} "
+    print(f"{'ranks':>5} {'particles':>10} {'build s':>8} {'set-up s':>9} {'ms/step':>9} {'halo ms':>8} {'speed-up':>9} "
           f"{'efficiency':>10} {'us/particle-step/core':>22}")
     for r in rows:
         r["speedup"] = base / r["step_ms"]
         r["efficiency"] = r["speedup"] / r["ranks"]
-        print(f"{r['ranks']:5d} {r['particles']:10d} {r['setup_s']:9.1f} {r['step_ms']:9.1f} {r['halo_ms']:8.2f} "
+        print(f"{r['ranks']:5d} {r['particles']:10d} {r['build_s']:8.2f} {r['setup_s']:9.1f} {r['step_ms']:9.1f} {r['halo_ms']:8.2f} "
               f"{r['speedup']:9.2f} {r['efficiency']:10.2f} {r['us_per_particle_step_core']:22.3f}")
     os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
     with open(args.json, "w") as fh:

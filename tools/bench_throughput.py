@@ -27,8 +27,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from mpi4py import MPI  # noqa: E402
 
 from parsph import config  # noqa: E402
-from parsph.build import build_body  # noqa: E402
-from parsph.parallel.decomposition import distribute  # noqa: E402
+from parsph.build import build_local  # noqa: E402
 from parsph.solver import Simulation  # noqa: E402
 
 
@@ -51,7 +50,7 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
 
 def measure(dim, particles, alpha, form, steps, eta=0.0, every=0):
     scene = block(dim, particles, alpha, form, eta, every)
-    sim = Simulation(scene, distribute(build_body(scene), MPI.COMM_SELF), MPI.COMM_SELF)
+    sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
     for _ in range(5):

@@ -1,13 +1,19 @@
-"""Particle geometry: generators returning (positions (n, D), volumes (n,)), kernel
-support radii and particle group selection."""
+"""Particle geometry: part generators (`count` particles, `rows(start, stop)` ->
+(positions (n, D), volumes (n,))) and whole-set functions, kernel support radii and
+particle group selection."""
 
 from .groups import select
-from .lattice import box
-from .shapes import cylinder, disk, ring, union
+from .lattice import Box, box
+from .shapes import Cylinder, Disk, Ring, cylinder, disk, ring, shadowed, union
 from .smoothing import support_for_neighbours, support_from_spacing
-from .voronoi import random_box, random_patch
+from .voronoi import RandomPatch, random_box, random_patch
 
 __all__ = [
+    "Box",
+    "Cylinder",
+    "Disk",
+    "RandomPatch",
+    "Ring",
     "box",
     "cylinder",
     "disk",
@@ -15,6 +21,7 @@ __all__ = [
     "random_patch",
     "ring",
     "select",
+    "shadowed",
     "support_for_neighbours",
     "support_from_spacing",
     "union",

@@ -22,7 +22,42 @@ def _fields(value, name, required, optional=()):
                          + f", got {sorted(value)}")
 
 
-def select(spec, positions, volumes=None):
+def _reduce(value, how, comm):
+    """`how` of `value` over all ranks (the value itself without a communicator)."""
+    return value if comm is None else how(comm.allgather(value))
+
+
+def _kth(values, k, comm):
+    """The k-th smallest (from 0) of all ranks' values, by bisection on the value."""
+    lo = _reduce(float(values.min()) if len(values) else np.inf, min, comm)
+    hi = _reduce(float(values.max()) if len(values) else -np.inf, max, comm)
+
+    def count(v):
+        return _reduce(int(np.count_nonzero(values <= v)), sum, comm)
+
+    if count(lo) > k:
+        return lo
+    while True:  # count(<= lo) <= k < count(<= hi): the answer lies in (lo, hi]
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            return hi
+        if count(mid) > k:
+            hi = mid
+        else:
+            lo = mid
+
+
+def _median(values, comm):
+    """np.median of all ranks' values."""
+    n = _reduce(len(values), sum, comm)
+    if comm is None:
+        return float(np.median(values))
+    if n % 2:
+        return _kth(values, n // 2, comm)
+    return (_kth(values, n // 2 - 1, comm) + _kth(values, n // 2, comm)) / 2
+
+
+def select(spec, positions, volumes=None, ids=None, comm=None):
     """Boolean mask (n,) of the particles matched by ``spec``.
 
     ``spec`` holds exactly one selector key, plus an optional ``"invert": bool``:
@@ -33,6 +68,9 @@ def select(spec, positions, volumes=None):
     Comparisons allow 1e-12 × the coordinate scale. For ``extreme`` the tolerance may be
     omitted when ``volumes`` is given; it then defaults to half the median particle size
     volumes^(1/D). An empty selection is returned as such.
+
+    With a communicator ``comm`` each rank passes its own particles (global ids ``ids``,
+    which order the ``nearest`` ties) and the selection is that of the whole set.
     """
     pos = np.asarray(positions, dtype=np.float64)
     if pos.ndim != 2 or not 1 <= pos.shape[1] <= 3:
@@ -48,7 +86,8 @@ def select(spec, positions, volumes=None):
     if not isinstance(invert, bool):
         raise ValueError(f"select: invert must be true or false, got {invert!r}")
     key, value = keys[0], spec[keys[0]]
-    scale = float(np.abs(pos).max()) if n else 0.0
+    ids = np.arange(n) if ids is None else np.asarray(ids)
+    scale = _reduce(float(np.abs(pos).max()) if n else 0.0, max, comm)
     tol = 1e-12 * (scale if scale > 0.0 else 1.0)
 
     if key == "all":
@@ -77,9 +116,10 @@ def select(spec, positions, volumes=None):
         mask = (pos - p) @ (normal / length) >= -tol
     elif key == "nearest":
         p = _vector(value, "nearest", "select", dim)
-        mask = np.zeros(n, dtype=bool)
-        if n:
-            mask[np.argmin(np.linalg.norm(pos - p, axis=1))] = True
+        dist = np.linalg.norm(pos - p, axis=1)
+        i = int(np.lexsort((ids, dist))[0]) if n else -1
+        best = _reduce((float(dist[i]), int(ids[i])) if n else (np.inf, -1), min, comm)
+        mask = ids == best[1]
     else:
         _fields(value, "extreme", ("axis", "side"), ("tolerance",))
         axis, side = value["axis"], value["side"]
@@ -93,14 +133,12 @@ def select(spec, positions, volumes=None):
             vol = np.asarray(volumes, dtype=np.float64)
             if vol.shape != (n,):
                 raise ValueError(f"select: volumes must have shape ({n},), got {vol.shape}")
-            t = 0.5 * float(np.median(vol)) ** (1.0 / dim) if n else 0.0
+            t = 0.5 * _median(vol, comm) ** (1.0 / dim) if _reduce(n, sum, comm) else 0.0
         else:
             raise ValueError("select: extreme.tolerance is required when volumes are not given")
         x = pos[:, axis]
-        if not n:
-            mask = np.zeros(0, dtype=bool)
-        elif side == "min":
-            mask = x <= x.min() + t + tol
+        if side == "min":
+            mask = x <= _reduce(float(x.min()) if n else np.inf, min, comm) + t + tol
         else:
-            mask = x >= x.max() - t - tol
+            mask = x >= _reduce(float(x.max()) if n else -np.inf, max, comm) - t - tol
     return ~mask if invert else mask

@@ -65,40 +65,56 @@ def _ravel_first_fastest(arrays):
     return [g.ravel(order="F") for g in grids]
 
 
-def box(lower, upper, spacing, placement="cell"):
-    """Lattice filling the box [lower, upper]; returns (positions (n, D), volumes (n,)).
+class Box:
+    """Lattice filling the box [lower, upper], generated in blocks of rows.
 
     The number of cells per axis is round(length/spacing); the resulting spacing must
     match ``spacing`` to 1e-6 relative. ``placement="cell"`` puts one particle at each
     cell centre; ``placement="node"`` puts particles on the count+1 nodes per axis and
     halves the volume once per axis on which a node lies on the boundary, so the total
-    is the box volume. Particles are ordered with the x index varying fastest.
+    is the box volume. Particles are ordered with the x index varying fastest; `rows(start,
+    stop)` returns (positions, volumes) of particles start..stop-1 of that order.
     """
-    lo, hi = _bounds(lower, upper, "box")
-    h0 = _positive(spacing, "spacing", "box")
-    if placement not in ("cell", "node"):
-        raise ValueError(f"box: placement must be 'cell' or 'node', got {placement!r}")
-    coords, weights = [], []
-    for k in range(lo.size):
-        length = hi[k] - lo[k]
-        count = round(length / h0)
-        if count < 1:
-            raise ValueError(f"box: the box length {float(length):g} on axis {k} is shorter than "
-                             f"half the spacing {float(h0):g}: no particle fits")
-        if abs(length / count - h0) > 1e-6 * h0:
-            raise ValueError(f"box: the box length {float(length):g} on axis {k} is not a multiple of "
-                             f"spacing={float(h0):g} (to 1e-6 relative)")
-        h = length / count
-        if placement == "cell":
-            coords.append(lo[k] + (np.arange(count) + 0.5) * h)
-            weights.append(np.full(count, h))
-        else:
-            x = lo[k] + np.arange(count + 1) * h
-            x[-1] = hi[k]
-            w = np.full(count + 1, h)
-            w[[0, -1]] = 0.5 * h
-            coords.append(x)
-            weights.append(w)
-    positions = np.column_stack(_ravel_first_fastest(coords))
-    volumes = np.prod(np.column_stack(_ravel_first_fastest(weights)), axis=1)
-    return positions, volumes
+
+    blockwise = True  # rows(start, stop) builds only those rows
+
+    def __init__(self, lower, upper, spacing, placement="cell"):
+        lo, hi = _bounds(lower, upper, "box")
+        h0 = _positive(spacing, "spacing", "box")
+        if placement not in ("cell", "node"):
+            raise ValueError(f"box: placement must be 'cell' or 'node', got {placement!r}")
+        self.coords, self.weights = [], []
+        for k in range(lo.size):
+            length = hi[k] - lo[k]
+            count = round(length / h0)
+            if count < 1:
+                raise ValueError(f"box: the box length {float(length):g} on axis {k} is shorter than "
+                                 f"half the spacing {float(h0):g}: no particle fits")
+            if abs(length / count - h0) > 1e-6 * h0:
+                raise ValueError(f"box: the box length {float(length):g} on axis {k} is not a multiple of "
+                                 f"spacing={float(h0):g} (to 1e-6 relative)")
+            h = length / count
+            if placement == "cell":
+                self.coords.append(lo[k] + (np.arange(count) + 0.5) * h)
+                self.weights.append(np.full(count, h))
+            else:
+                x = lo[k] + np.arange(count + 1) * h
+                x[-1] = hi[k]
+                w = np.full(count + 1, h)
+                w[[0, -1]] = 0.5 * h
+                self.coords.append(x)
+                self.weights.append(w)
+        self.shape = tuple(len(c) for c in self.coords)
+        self.count = math.prod(self.shape)
+
+    def rows(self, start: int, stop: int):
+        index = np.unravel_index(np.arange(start, stop), self.shape, order="F")
+        positions = np.column_stack([c[i] for c, i in zip(self.coords, index)])
+        volumes = np.prod(np.column_stack([w[i] for w, i in zip(self.weights, index)]), axis=1)
+        return positions, volumes
+
+
+def box(lower, upper, spacing, placement="cell"):
+    """All particles of :class:`Box`; returns (positions (n, D), volumes (n,))."""
+    lattice = Box(lower, upper, spacing, placement)
+    return lattice.rows(0, lattice.count)

@@ -4,83 +4,134 @@ volume, and a union of bodies that drops coincident particles."""
 import math
 
 import numpy as np
-from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from .lattice import _nonnegative, _positive, _ravel_first_fastest, _vector
 
 
-def cylinder(base_center, radius, length, spacing, axis=2):
-    """3D cylinder from a cell-centred cubic lattice; returns (positions, volumes).
+class Cylinder:
+    """3D cylinder from a cell-centred cubic lattice, generated in blocks of rows.
 
     In each cross-section the lattice points sit at base_center + (i, j)·spacing, so the
     cylinder axis passes through a lattice column, and those with distance < radius from
     the axis are kept. Axial layers sit at base + (k + 0.5)·length/n_layers with
-    n_layers = max(1, round(length/spacing)). All volumes are equal and sum to π r² L.
+    n_layers = max(1, round(length/spacing)), ordered layer by layer. All volumes are
+    equal and sum to π r² L.
     """
-    c = _vector(base_center, "base_center", "cylinder", dim=3)
-    r = _positive(radius, "radius", "cylinder")
-    length = _positive(length, "length", "cylinder")
-    h = _positive(spacing, "spacing", "cylinder")
-    if isinstance(axis, bool) or not isinstance(axis, (int, np.integer)) or axis not in (0, 1, 2):
-        raise ValueError(f"cylinder: axis must be 0, 1 or 2, got {axis!r}")
-    m = math.ceil(r / h)
-    offsets = np.arange(-m, m + 1) * h
-    u, v = _ravel_first_fastest([offsets, offsets])
-    inside = np.hypot(u, v) < r * (1.0 - 1e-12)
-    u, v = u[inside], v[inside]
-    n_layers = max(1, round(length / h))
-    w = (np.arange(n_layers) + 0.5) * (length / n_layers)
-    plane = [k for k in range(3) if k != axis]
-    positions = np.empty((u.size * n_layers, 3))
-    positions[:, plane[0]] = np.tile(u, n_layers)
-    positions[:, plane[1]] = np.tile(v, n_layers)
-    positions[:, axis] = np.repeat(w, u.size)
-    positions += c
-    volumes = np.full(positions.shape[0], math.pi * r * r * length / positions.shape[0])
-    return positions, volumes
+
+    blockwise = True  # rows(start, stop) builds only those rows
+
+    def __init__(self, base_center, radius, length, spacing, axis=2):
+        self.center = _vector(base_center, "base_center", "cylinder", dim=3)
+        r = _positive(radius, "radius", "cylinder")
+        length = _positive(length, "length", "cylinder")
+        h = _positive(spacing, "spacing", "cylinder")
+        if isinstance(axis, bool) or not isinstance(axis, (int, np.integer)) or axis not in (0, 1, 2):
+            raise ValueError(f"cylinder: axis must be 0, 1 or 2, got {axis!r}")
+        m = math.ceil(r / h)
+        offsets = np.arange(-m, m + 1) * h
+        u, v = _ravel_first_fastest([offsets, offsets])
+        inside = np.hypot(u, v) < r * (1.0 - 1e-12)
+        self.u, self.v = u[inside], v[inside]
+        n_layers = max(1, round(length / h))
+        self.w = (np.arange(n_layers) + 0.5) * (length / n_layers)
+        self.axis = axis
+        self.count = self.u.size * n_layers
+        self.volume = math.pi * r * r * length / self.count
+
+    def rows(self, start: int, stop: int):
+        layer, j = np.divmod(np.arange(start, stop), self.u.size)
+        plane = [k for k in range(3) if k != self.axis]
+        positions = np.empty((stop - start, 3))
+        positions[:, plane[0]] = self.u[j]
+        positions[:, plane[1]] = self.v[j]
+        positions[:, self.axis] = self.w[layer]
+        positions += self.center
+        return positions, np.full(stop - start, self.volume)
 
 
-def _concentric(center, r_in, r_out, h):
-    """Particles on concentric circles covering the annulus r_in <= r <= r_out."""
-    n_r = max(1, round((r_out - r_in) / h))
-    dr = (r_out - r_in) / n_r
-    pos, vol = [], []
-    for k in range(n_r):
-        rk = r_in + (k + 0.5) * dr
-        n_t = max(3, round(2.0 * math.pi * rk / h))
-        dt = 2.0 * math.pi / n_t
-        theta = np.arange(n_t) * dt
-        pos.append(center + rk * np.column_stack((np.cos(theta), np.sin(theta))))
-        vol.append(np.full(n_t, rk * dr * dt))
-    return np.concatenate(pos), np.concatenate(vol)
+class Concentric:
+    """2D particles on concentric circles covering the annulus r_in <= r <= r_out, in
+    blocks of rows: round((r_out - r_in)/spacing) layers (at least 1) at radii r_in +
+    (k + 0.5)·Δr, each with round(2π r_k/spacing) (at least 3) particles evenly spaced in
+    angle and volume r_k Δr Δθ, so the volumes sum to π (r_out² - r_in²)."""
+
+    blockwise = True  # rows(start, stop) builds only those rows
+
+    def __init__(self, center, r_in, r_out, h):
+        self.center = center
+        n_r = max(1, round((r_out - r_in) / h))
+        dr = (r_out - r_in) / n_r
+        self.radius = r_in + (np.arange(n_r) + 0.5) * dr
+        per_layer = np.maximum(3, np.round(2.0 * math.pi * self.radius / h)).astype(np.int64)
+        self.dtheta = 2.0 * math.pi / per_layer
+        self.volume = self.radius * dr * self.dtheta
+        self.first = np.concatenate([[0], np.cumsum(per_layer)])
+        self.count = int(self.first[-1])
+
+    def rows(self, start: int, stop: int):
+        index = np.arange(start, stop)
+        layer = np.searchsorted(self.first, index, side="right") - 1
+        theta = (index - self.first[layer]) * self.dtheta[layer]
+        rk = self.radius[layer][:, None]
+        positions = self.center + rk * np.column_stack((np.cos(theta), np.sin(theta)))
+        return positions, self.volume[layer].copy()
+
+
+class Ring(Concentric):
+    """2D annulus on concentric circles."""
+
+    def __init__(self, center, inner_radius, outer_radius, spacing):
+        c = _vector(center, "center", "ring", dim=2)
+        r_in = _nonnegative(inner_radius, "inner_radius", "ring")
+        r_out = _positive(outer_radius, "outer_radius", "ring")
+        if r_in >= r_out:
+            raise ValueError(f"ring: inner_radius={r_in!r} must be < outer_radius={r_out!r}")
+        super().__init__(c, r_in, r_out, _positive(spacing, "spacing", "ring"))
+
+
+class Disk(Concentric):
+    """2D disk: the concentric construction with inner radius 0."""
+
+    def __init__(self, center, radius, spacing):
+        c = _vector(center, "center", "disk", dim=2)
+        r = _positive(radius, "radius", "disk")
+        super().__init__(c, 0.0, r, _positive(spacing, "spacing", "disk"))
+
+
+def _all(generator):
+    return generator.rows(0, generator.count)
+
+
+def cylinder(base_center, radius, length, spacing, axis=2):
+    """All particles of :class:`Cylinder`; returns (positions, volumes)."""
+    return _all(Cylinder(base_center, radius, length, spacing, axis))
 
 
 def ring(center, inner_radius, outer_radius, spacing):
-    """2D annulus on concentric circles; returns (positions, volumes).
-
-    round((r_out - r_in)/spacing) layers (at least 1) at radii r_in + (k + 0.5)·Δr, each
-    with round(2π r_k/spacing) (at least 3) particles evenly spaced in angle and volume
-    r_k Δr Δθ, so the volumes sum to π (r_out² - r_in²).
-    """
-    c = _vector(center, "center", "ring", dim=2)
-    r_in = _nonnegative(inner_radius, "inner_radius", "ring")
-    r_out = _positive(outer_radius, "outer_radius", "ring")
-    if r_in >= r_out:
-        raise ValueError(f"ring: inner_radius={r_in!r} must be < outer_radius={r_out!r}")
-    return _concentric(c, r_in, r_out, _positive(spacing, "spacing", "ring"))
+    """All particles of :class:`Ring`; returns (positions, volumes)."""
+    return _all(Ring(center, inner_radius, outer_radius, spacing))
 
 
 def disk(center, radius, spacing):
-    """2D disk: the concentric construction of :func:`ring` with inner radius 0."""
-    c = _vector(center, "center", "disk", dim=2)
-    r = _positive(radius, "radius", "disk")
-    return _concentric(c, 0.0, r, _positive(spacing, "spacing", "disk"))
+    """All particles of :class:`Disk`; returns (positions, volumes)."""
+    return _all(Disk(center, radius, spacing))
+
+
+def shadowed(positions, index, others, other_index, tol):
+    """Mask of the points of `positions` (global indices `index`) closer than `tol` to a
+    point of `others` with a smaller index: the particles a union of parts drops."""
+    dropped = np.zeros(len(positions), dtype=bool)
+    if tol > 0.0 and len(positions) and len(others):
+        near = cKDTree(positions).sparse_distance_matrix(cKDTree(others), tol, output_type="ndarray")
+        near = near[(near["v"] < tol) & (other_index[near["j"]] < index[near["i"]])]
+        dropped[near["i"]] = True
+    return dropped
 
 
 def union(*parts, tol):
     """Concatenate (positions, volumes) parts, dropping (with its volume) every particle
-    closer than ``tol`` to an earlier kept particle; returns (positions, volumes)."""
+    closer than ``tol`` to an earlier particle; returns (positions, volumes)."""
     if not parts:
         raise ValueError("union: parts must contain at least one (positions, volumes) pair")
     tol = _nonnegative(tol, "tol", "union")
@@ -102,15 +153,6 @@ def union(*parts, tol):
         vol_list.append(v)
     positions = np.concatenate(pos_list)
     volumes = np.concatenate(vol_list)
-    n = positions.shape[0]
-    keep = np.ones(n, dtype=bool)
-    if tol > 0.0 and n > 1:
-        pairs = cKDTree(positions).query_pairs(tol, output_type="ndarray")
-        dist = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
-        pairs = pairs[dist < tol]
-        lo, hi = pairs.min(axis=1), pairs.max(axis=1)
-        later = csr_matrix((np.ones(lo.size, dtype=bool), (lo, hi)), shape=(n, n))
-        for i in np.unique(lo):
-            if keep[i]:
-                keep[later.indices[later.indptr[i]:later.indptr[i + 1]]] = False
+    index = np.arange(len(positions))
+    keep = ~shadowed(positions, index, positions, index, tol)
     return positions[keep], volumes[keep]

@@ -95,3 +95,25 @@ def random_patch(lower, upper, count, seed=0, lloyd_iterations=20):
         raise ValueError(f"random_patch: lower and upper must have 2 components, "
                          f"got {lower!r} and {upper!r}")
     return random_box(lower, upper, count, seed, lloyd_iterations)
+
+
+class RandomPatch:
+    """:func:`random_patch` as a part generator. The Lloyd relaxation needs all points at
+    once, so the set exists only whole (`blockwise` is False): one rank builds it and hands
+    out the blocks."""
+
+    blockwise = False
+
+    def __init__(self, lower, upper, count, seed=0, lloyd_iterations=20):
+        try:
+            self.count = operator.index(count)
+        except TypeError:
+            raise ValueError(f"random_box: count must be an integer, got {count!r}") from None
+        self.args = (lower, upper, count, seed, lloyd_iterations)
+        self._whole = None
+
+    def rows(self, start: int, stop: int):
+        if self._whole is None:
+            self._whole = random_patch(*self.args)
+        positions, volumes = self._whole
+        return positions[start:stop], volumes[start:stop]

@@ -7,7 +7,8 @@ the state (displacement, velocity) and, in the updated formulation, the current 
 energies, the output schedules, and the resolved scene with its hash. It is written by all
 ranks together under a temporary name, closed, and renamed, so a checkpoint either exists
 whole or not at all; the last K are kept. Every dataset carries an order-independent
-checksum; a file that does not open, lacks a dataset or fails a checksum is refused.
+checksum; a file that does not open, lacks a dataset or fails a checksum is refused. On
+restart every rank reads (and checksums) only a contiguous block of the rows.
 Restarting needs the same physics: only end time, step limit, wall-clock limit and output
 settings may differ from the checkpoint's scene.
 """
@@ -26,7 +27,7 @@ import numpy as np
 from parsph import config
 from parsph.errors import InputError
 from parsph.io.h5 import ParticleFile
-from parsph.parallel.runtime import COMM, collective, say
+from parsph.parallel.runtime import collective, say
 
 FORMAT = 2
 # keys that may change on restart: they do not change the physics of the steps taken
@@ -95,8 +96,9 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
     return final
 
 
-def _validate(path: str) -> dict:
-    """Read and check a checkpoint on one process; raises ValueError saying what is wrong."""
+def _read_block(path: str, comm) -> dict:
+    """This rank's contiguous block of a checkpoint's rows with their partial checksums, and
+    the attributes; raises ValueError saying what is wrong."""
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
@@ -109,52 +111,75 @@ def _validate(path: str) -> dict:
             raise ValueError(f"is incomplete (attribute {exc} missing)") from None
         if attrs["format"] != FORMAT:
             raise ValueError(f"has format {attrs['format']}, this parsph reads format {FORMAT}")
-        total = int(attrs["particles"])
-        sums = json.loads(attrs["checksums"])
-        gid = np.arange(total)
-        for field in json.loads(attrs["fields"]):
-            if field not in f or len(f[field]) != total:
-                raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
-            try:
-                data = f[field][()]
-            except OSError as exc:
-                raise ValueError(f"dataset '{field}' cannot be read ({exc})") from None
-            if str(checksum(gid, data)) != sums[field]:
-                raise ValueError(f"is corrupted (checksum of '{field}' does not match)")
         if scene_hash(json.loads(attrs["scene"])) != attrs["scene_hash"]:
             raise ValueError("is corrupted (scene hash does not match)")
-    return {"path": path, "scene": json.loads(attrs["scene"]), "clock": json.loads(attrs["clock"])}
+        total = int(attrs["particles"])
+        start, stop = np.linspace(0, total, comm.size + 1).round().astype(np.int64)[comm.rank: comm.rank + 2]
+        gid = np.arange(start, stop, dtype=np.int64)
+        names = json.loads(attrs["fields"])
+        expected = json.loads(attrs["checksums"])
+        fields, sums = {"gid": gid}, {}
+        for field in names:
+            if field not in f or len(f[field]) != total or field not in expected:
+                raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
+            try:
+                fields[field] = f[field][start:stop]
+            except OSError as exc:
+                raise ValueError(f"dataset '{field}' cannot be read ({exc})") from None
+            sums[field] = checksum(gid, fields[field])
+    return {"attrs": attrs, "fields": fields, "sums": sums}
 
 
-def choose(spec: str, out_dir: str) -> str:
-    """Rank 0 picks the checkpoint (`latest`: the newest valid one in OUT/checkpoints) and
-    broadcasts its path; a named checkpoint that is invalid is refused."""
-    path = None
-    with collective():
-        if COMM.rank == 0:
+def read(path: str, comm) -> dict:
+    """Collective: check checkpoint `path`, each rank reading a contiguous block of its rows;
+    returns the block ("fields", with "gid") and the run's scene, groups, clock, totals and
+    schedules. Raises the same ValueError on every rank if the file is not whole."""
+    block, failure = None, None
+    try:
+        block = _read_block(path, comm)
+    except ValueError as exc:
+        failure = str(exc)
+    failures = [m for m in comm.allgather(failure) if m]
+    if failures:
+        raise ValueError(failures[0])
+    attrs = block["attrs"]
+    expected = json.loads(attrs["checksums"])
+    for field, part in block["sums"].items():
+        if str(_sum_mod64(comm, part)) != expected[field]:
+            raise ValueError(f"is corrupted (checksum of '{field}' does not match)")
+    data = {"path": path, "fields": block["fields"], "scene": json.loads(attrs["scene"]),
+            "group_names": json.loads(attrs["groups"])}
+    for key in ("clock", "totals", "schedules"):
+        data[key] = json.loads(attrs[key])
+    return data
+
+
+def load(spec: str, out_dir: str, comm) -> dict:
+    """Collective: the checkpoint to restart from, read in blocks (`read`): `latest` is the
+    newest valid one in OUT/checkpoints (invalid ones are skipped with a message), else
+    the named file, which is refused if invalid."""
+    candidates = None
+    with collective(comm):
+        if comm.rank == 0:
             if spec == "latest":
-                found = sorted(glob.glob(os.path.join(out_dir, "checkpoints", "step_*.h5")),
-                               key=lambda p: int(re.findall(r"\d+", os.path.basename(p))[0]))
-                if not found:
+                candidates = sorted(glob.glob(os.path.join(out_dir, "checkpoints", "step_*.h5")),
+                                    key=lambda p: int(re.findall(r"\d+", os.path.basename(p))[0]))[::-1]
+                if not candidates:
                     raise InputError(f"--restart latest: no checkpoints in {out_dir}/checkpoints")
-                for candidate in reversed(found):
-                    try:
-                        _validate(candidate)
-                        path = candidate
-                        break
-                    except ValueError as exc:
-                        say(f"parsph: skipping checkpoint {candidate}: it {exc}")
-                if path is None:
-                    raise InputError(f"--restart latest: no valid checkpoint in {out_dir}/checkpoints")
+            elif not os.path.isfile(spec):
+                raise InputError(f"--restart: checkpoint not found: {spec}")
             else:
-                if not os.path.isfile(spec):
-                    raise InputError(f"--restart: checkpoint not found: {spec}")
-                try:
-                    _validate(spec)
-                except ValueError as exc:
-                    raise InputError(f"--restart: checkpoint {spec} {exc}") from None
-                path = spec
-    return COMM.bcast(path, root=0)
+                candidates = [spec]
+    for path in comm.bcast(candidates, root=0):
+        try:
+            return read(path, comm)
+        except ValueError as exc:
+            with collective(comm):
+                if spec != "latest":
+                    raise InputError(f"--restart: checkpoint {spec} {exc}")
+            say(f"parsph: skipping checkpoint {path}: it {exc}")
+    with collective(comm):
+        raise InputError(f"--restart latest: no valid checkpoint in {out_dir}/checkpoints")
 
 
 def differing_keys(old: dict, new: dict, prefix: str = "") -> list:
@@ -178,20 +203,3 @@ def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
         raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
                          "only time.end, time.max_steps, time.wall_limit and output settings may change "
                          "on restart")
-
-
-def load(path: str, comm) -> dict:
-    """Collective: the checkpoint's attributes on every rank and its particle arrays (all
-    rows) on rank 0, which distributes them (parallel.decomposition.distribute)."""
-    data = {}
-    with collective(comm):
-        if comm.rank == 0:
-            with h5py.File(path, "r") as f:
-                data = {field: f[field][()] for field in json.loads(f.attrs["fields"])}
-                data["attrs"] = {k: f.attrs[k] for k in ("scene", "groups", "clock", "totals", "schedules")}
-    attrs = comm.bcast(data.pop("attrs", None), root=0)
-    data["scene"] = json.loads(attrs["scene"])
-    data["group_names"] = json.loads(attrs["groups"])
-    for key in ("clock", "totals", "schedules"):
-        data[key] = json.loads(attrs[key])
-    return data

@@ -13,8 +13,9 @@ A rank's local arrays are ordered: owned particles (by global id), then layer-1 
 global id). `add_ghosts` finds both layers across ranks from the subdomains' bounding
 boxes; `Decomposition.refresh(arrays...)` copies the owners' values into the layer-1 slots.
 
-At start-up rank 0 builds (or reads) the particle set and hands out contiguous blocks of it
-(`distribute`); from then on every rank holds only its own particles and ghosts.
+At start-up each rank generates (parsph.build) or reads (parsph.io.checkpoint) a contiguous
+block of the particle set and `partition` sends every particle to its owner: no rank ever
+holds the whole set.
 """
 
 from __future__ import annotations
@@ -24,8 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
-
-from parsph.build import Body
 
 
 def _smallest(c: np.ndarray, ids: np.ndarray, target: int, comm) -> np.ndarray:
@@ -111,6 +110,30 @@ def migrate(fields: dict, dest: np.ndarray, comm) -> dict:
     return _take(fields, order)
 
 
+def partition(fields: dict, position: str, comm) -> dict:
+    """Send every particle (all arrays of `fields`) to its owner by parallel RCB of the
+    positions `fields[position]`; returns the particles this rank owns, by gid."""
+    return migrate(fields, parallel_rcb(fields[position], fields["gid"], comm), comm)
+
+
+def nearby(fields: dict, x: np.ndarray, reach: float, comm) -> dict:
+    """The particles of other ranks (all arrays of `fields`, plus "owner") within `reach`
+    of this rank's bounding box of the positions `x` (rows of `fields`)."""
+    n = len(x)
+    boxes = comm.allgather((x.min(axis=0), x.max(axis=0)) if n else None)
+    out = []
+    for r, box in enumerate(boxes):
+        if r == comm.rank or box is None or n == 0:
+            out.append(None)
+            continue
+        gap = np.maximum(0.0, np.maximum(box[0] - x, x - box[1]))
+        sel = np.flatnonzero(np.einsum("na,na->n", gap, gap) <= reach ** 2)
+        chunk = _take(fields, sel)
+        chunk["owner"] = np.full(len(sel), comm.rank, np.int64)
+        out.append(chunk)
+    return _concat(comm.alltoall(out), dict(fields, owner=np.zeros(0, np.int64)))
+
+
 @dataclass
 class LocalBody:
     """One rank's particles: owned (by global id), then layer-1 ghosts (by owner rank, then
@@ -137,18 +160,7 @@ def add_ghosts(owned: dict, position: str, comm) -> LocalBody:
                          total=total, fields=owned)
     x = owned[position]
     reach = comm.allreduce(float(owned["support"].max()) if n else 0.0, op=MPI.MAX)
-    boxes = comm.allgather((x.min(axis=0), x.max(axis=0)) if n else None)
-    out = []
-    for r, box in enumerate(boxes):
-        if r == comm.rank or box is None or n == 0:
-            out.append(None)
-            continue
-        gap = np.maximum(0.0, np.maximum(box[0] - x, x - box[1]))
-        sel = np.flatnonzero(np.einsum("na,na->n", gap, gap) <= (2.0 * reach) ** 2)
-        chunk = _take(owned, sel)
-        chunk["owner"] = np.full(len(sel), comm.rank, np.int64)
-        out.append(chunk)
-    cand = _concat(comm.alltoall(out), dict(owned, owner=np.zeros(0, np.int64)))
+    cand = nearby(owned, x, 2.0 * reach, comm)
     layer1 = layer2 = np.zeros(0, np.int64)
     if n and len(cand["gid"]):
         dist1, _ = cKDTree(x).query(cand[position], distance_upper_bound=reach)
@@ -164,34 +176,6 @@ def add_ghosts(owned: dict, position: str, comm) -> LocalBody:
     fields = {k: np.concatenate([owned[k], ghosts[k]]) for k in owned}
     return LocalBody(gid=fields["gid"], owner=owner, n_owned=n, n_ghost=len(layer1), total=total,
                      fields=fields)
-
-
-def body_fields(body: Body, state: dict | None = None) -> dict:
-    """The per-particle arrays of a reference set (plus `state`, e.g. a checkpoint's), with
-    global ids and the groups as one uint8 column per group (sorted by name)."""
-    names = sorted(body.groups)
-    groups = np.stack([body.groups[k] for k in names], axis=1).astype(np.uint8) if names else \
-        np.zeros((body.count, 0), np.uint8)
-    fields = {"gid": np.arange(body.count, dtype=np.int64), "X": body.X, "measure": body.measure,
-              "volume": body.volume, "mass": body.mass, "support": body.support, "groups": groups}
-    fields.update(state or {})
-    return fields
-
-
-def distribute(body: Body | None, comm, state: dict | None = None) -> LocalBody:
-    """Rank 0 hands each rank a contiguous block of `body` (given on rank 0 only) and of the
-    per-particle `state`; the ranks then partition the set by parallel RCB of the positions
-    `state["Xr"]` (an updated reference) or `body.X`, migrate, and exchange ghosts."""
-    blocks = None
-    if comm.rank == 0:
-        fields = body_fields(body, state)
-        cuts = np.linspace(0, body.count, comm.size + 1).round().astype(int)
-        blocks = [_take(fields, np.arange(cuts[r], cuts[r + 1])) for r in range(comm.size)]
-    mine = comm.scatter(blocks, root=0) if comm.size > 1 else blocks[0]
-    position = "Xr" if "Xr" in mine else "X"
-    if comm.size > 1:
-        mine = migrate(mine, parallel_rcb(mine[position], mine["gid"], comm), comm)
-    return add_ghosts(mine, position, comm)
 
 
 class Decomposition:
