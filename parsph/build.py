@@ -11,7 +11,6 @@ rank ever holds the whole set.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from parsph import geometry
 from parsph.errors import InputError
@@ -92,20 +91,18 @@ def _neighbour_support(x: np.ndarray, target: int, comm) -> np.ndarray:
     """geometry.support_for_neighbours over all ranks' particles: each rank gathers the
     particles within a reach of its own, doubling the reach until every particle of every
     rank has its target + 1 nearest others inside it."""
-    k = target + 2  # the particle itself, target neighbours and the next one
-    local = cKDTree(x).query(x, k=k)[0][:, -1].max() if len(x) >= k else np.inf
+    # 2 h_i >= d_{target+1}: a rank's own supports bound the reach its particles need
+    local = 2.0 * geometry.support_for_neighbours(x, target).max() if len(x) >= target + 2 else np.inf
     bounds = [b for b in comm.allgather(float(local)) if np.isfinite(b)]
     reach = max(bounds) if bounds else 0.0
     if reach == 0.0:
         spans = [s for s in comm.allgather(float(np.ptp(x, axis=0).max()) if len(x) else None) if s]
         reach = max(spans) if spans else 1.0
     while True:
-        pts = np.concatenate([x, nearby({"X": x}, x, reach, comm)["X"]])
-        dist = np.zeros((0, k))
-        if len(x):
-            dist = cKDTree(pts).query(x, k=k, distance_upper_bound=reach)[0].reshape(len(x), k)
-        if all(comm.allgather(bool(np.isfinite(dist[:, -1]).all()))):
-            return 0.5 * (dist[:, target] + dist[:, target + 1])
+        others = nearby({"X": x}, x, reach, comm)["X"]
+        support = geometry.support_for_neighbours(x, target, others, reach) if len(x) else np.zeros(0)
+        if all(comm.allgather(bool(np.isfinite(support).all()))):
+            return support
         reach *= 2.0
 
 

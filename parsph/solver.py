@@ -27,7 +27,7 @@ from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
 from parsph.formulations import reference, tlsph
 from parsph.materials.elastic import MODEL_IDS, first_piola_stresses
-from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, migrate, parallel_rcb
+from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
 from parsph.parallel.runtime import collective
 from parsph.walls import Walls
 
@@ -286,13 +286,12 @@ class Simulation:
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
         if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
             self.hourglass_released_local += self.hourglass_energy_local  # the penalty restarts at 0
-        dest = np.full(n, self.comm.rank, np.int64)
         if self.comm.size > 1:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
-                dest = parallel_rcb(owned["Xr"], owned["gid"], self.comm)
+                owned = partition(owned, "Xr", self.comm)
         with collective(self.comm):
-            local = add_ghosts(migrate(owned, dest, self.comm), "Xr", self.comm)
+            local = add_ghosts(owned, "Xr", self.comm)
         try:
             self._adopt(local)
         except InputError as exc:  # the configuration, not the input, is at fault

@@ -47,9 +47,8 @@ def _kth(values, k, comm):
             lo = mid
 
 
-def _median(values, comm):
-    """np.median of all ranks' values."""
-    n = _reduce(len(values), sum, comm)
+def _median(values, n, comm):
+    """np.median of all ranks' values (n of them)."""
     if comm is None:
         return float(np.median(values))
     if n % 2:
@@ -133,7 +132,8 @@ def select(spec, positions, volumes=None, ids=None, comm=None):
             vol = np.asarray(volumes, dtype=np.float64)
             if vol.shape != (n,):
                 raise ValueError(f"select: volumes must have shape ({n},), got {vol.shape}")
-            t = 0.5 * _median(vol, comm) ** (1.0 / dim) if _reduce(n, sum, comm) else 0.0
+            total = _reduce(n, sum, comm)
+            t = 0.5 * _median(vol, total, comm) ** (1.0 / dim) if total else 0.0
         else:
             raise ValueError("select: extreme.tolerance is required when volumes are not given")
         x = pos[:, axis]

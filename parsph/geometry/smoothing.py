@@ -18,10 +18,12 @@ def _positions(positions, func):
     return pos
 
 
-def support_for_neighbours(positions, target):
+def support_for_neighbours(positions, target, others=None, reach=np.inf):
     """Support radius h_i = (d_target + d_{target+1})/2, d_k being the distance from
     particle i to its k-th nearest other particle, so that ``target`` other particles
-    lie within h_i (unless distances tie)."""
+    lie within h_i (unless distances tie). ``others`` are further points that count as
+    neighbours (another rank's particles); a particle with fewer than target + 1 others
+    within ``reach`` gets an infinite radius."""
     pos = _positions(positions, "support_for_neighbours")
     try:
         target = operator.index(target)
@@ -29,10 +31,11 @@ def support_for_neighbours(positions, target):
         raise ValueError(f"support_for_neighbours: target must be an integer, got {target!r}") from None
     if target < 1:
         raise ValueError(f"support_for_neighbours: target must be >= 1, got {target}")
-    if pos.shape[0] < target + 2:
+    if others is None and pos.shape[0] < target + 2:
         raise ValueError(f"support_for_neighbours: target={target} needs at least {target + 2} "
                          f"positions, got {pos.shape[0]}")
-    dist, _ = cKDTree(pos).query(pos, k=target + 2)
+    points = pos if others is None else np.concatenate([pos, others])
+    dist, _ = cKDTree(points).query(pos, k=target + 2, distance_upper_bound=reach)
     return 0.5 * (dist[:, target] + dist[:, target + 1])
 
 

@@ -35,21 +35,22 @@ corner = { nearest = [1.0, 0.25] }
 right = { extreme = { axis = 0, side = "max" } }
 low = { halfspace = { point = [0.0, 0.1], normal = [0.0, -1.0] } }
 """
+
+
+def node_box(x0, x1):
+    return f"""
+[[geometry.parts]]
+shape = "box"
+lower = [{x0}, 0.0]
+upper = [{x1}, 0.5]
+spacing = 0.05
+placement = "node"
+"""
+
+
 SCENES = {
     # two node lattices sharing a column of particles (kept once)
-    "union": HEAD + """
-[[geometry.parts]]
-shape = "box"
-lower = [0.0, 0.0]
-upper = [1.0, 0.5]
-spacing = 0.05
-placement = "node"
-[[geometry.parts]]
-shape = "box"
-lower = [1.0, 0.0]
-upper = [2.0, 0.5]
-spacing = 0.05
-placement = "node"
+    "union": HEAD + node_box(0.0, 1.0) + node_box(1.0, 2.0) + """
 [kernel]
 support = 2.0
 """ + GROUPS,
