@@ -14,7 +14,7 @@ import numpy as np
 
 from parsph import geometry
 from parsph.errors import InputError
-from parsph.parallel.decomposition import LocalBody, add_ghosts, nearby, partition
+from parsph.parallel.decomposition import LocalBody, add_ghosts, block_cuts, nearby, partition
 from parsph.parallel.runtime import collective
 
 PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": geometry.Cylinder,
@@ -43,7 +43,7 @@ def _block(gens: list, dim: int, comm) -> dict:
     """Particles cuts[r]..cuts[r+1]-1 of the parts (in part order) on rank r: candidate
     index "gid", positions "X", measures "measure"."""
     first = np.cumsum([0] + [g.count for g in gens])
-    cuts = np.linspace(0, first[-1], comm.size + 1).round().astype(np.int64)
+    cuts = block_cuts(first[-1], comm.size)
 
     def rows(start, stop):
         X, measure = [np.zeros((0, dim))], [np.zeros(0)]

@@ -27,6 +27,7 @@ import numpy as np
 from parsph import config
 from parsph.errors import InputError
 from parsph.io.h5 import ParticleFile
+from parsph.parallel.decomposition import block_cuts
 from parsph.parallel.runtime import collective, say
 
 FORMAT = 2
@@ -114,7 +115,7 @@ def _read_block(path: str, comm) -> dict:
         if scene_hash(json.loads(attrs["scene"])) != attrs["scene_hash"]:
             raise ValueError("is corrupted (scene hash does not match)")
         total = int(attrs["particles"])
-        start, stop = np.linspace(0, total, comm.size + 1).round().astype(np.int64)[comm.rank: comm.rank + 2]
+        start, stop = block_cuts(total, comm.size)[comm.rank: comm.rank + 2]
         gid = np.arange(start, stop, dtype=np.int64)
         names = json.loads(attrs["fields"])
         expected = json.loads(attrs["checksums"])

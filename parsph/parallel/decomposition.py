@@ -110,6 +110,12 @@ def migrate(fields: dict, dest: np.ndarray, comm) -> dict:
     return _take(fields, order)
 
 
+def block_cuts(total: int, ranks: int) -> np.ndarray:
+    """Row bounds of the contiguous blocks in which ranks generate or read a set of `total`
+    rows: rank r takes rows cuts[r]..cuts[r+1]-1."""
+    return np.linspace(0, total, ranks + 1).round().astype(np.int64)
+
+
 def partition(fields: dict, position: str, comm) -> dict:
     """Send every particle (all arrays of `fields`) to its owner by parallel RCB of the
     positions `fields[position]`; returns the particles this rank owns, by gid."""
