@@ -185,6 +185,13 @@ WALL_KEYS = {
     "lower": Key("vector", None, doc="with upper: the box of current positions where the wall acts"),
     "upper": Key("vector", None),
 }
+TOOL_KEYS = {
+    "group": Key("str", "all", doc="particles that can touch the tool"),
+    "lower": Key("vector", REQUIRED, doc="lower corner of the tool's box at t = 0 [m]"),
+    "upper": Key("vector", REQUIRED, doc="upper corner of the tool's box at t = 0 [m]"),
+    "radius": Key("float", 0.0, non_negative, "radius of the rounded edges [m]"),
+    "velocity": Key("vector", None, doc="the tool's prescribed velocity [m/s] (default at rest)"),
+}
 INITIAL_KEYS = {
     "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient")),
     "group": Key("str", "all"),
@@ -201,7 +208,7 @@ PROBE_KEYS = {
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
-TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "initial", "probes")
+TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "tools", "initial", "probes")
 
 
 def _suggest(name: str, known) -> str:
@@ -384,6 +391,22 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         if (wall["lower"] is None) != (wall["upper"] is None):
             raise InputError(f"walls[{i}]: give both lower and upper, or neither")
         scene["walls"].append(wall)
+
+    scene["tools"] = []
+    for i, t in enumerate(_array("tools", raw.get("tools"))):
+        tool = _table(f"tools[{i}]", t, TOOL_KEYS, dim)
+        check_group(f"tools[{i}].group", tool["group"])
+        if tool["velocity"] is None:
+            tool["velocity"] = [0.0] * dim
+        for key in ("lower", "upper", "velocity"):
+            _vector_len(f"tools[{i}].{key}", tool[key], dim)
+        smallest = min(b - a for a, b in zip(tool["lower"], tool["upper"]))
+        if smallest <= 0:
+            raise InputError(f"tools[{i}]: upper must exceed lower in every component")
+        if tool["radius"] > 0.5 * smallest:
+            raise InputError(f"tools[{i}].radius = {tool['radius']:g} exceeds half the tool's smallest "
+                             f"side ({0.5 * smallest:g})")
+        scene["tools"].append(tool)
 
     scene["initial"] = []
     for i, t in enumerate(_array("initial", raw.get("initial"))):

@@ -129,7 +129,7 @@ class Simulation:
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.youngs = np.full(keep, self.constants.youngs)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
-        self.walls = Walls(self.scene["walls"], self.groups)
+        self.walls = Walls(self.scene["walls"], self.scene["tools"], self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
 
     def _hourglass_frequencies(self) -> np.ndarray:
@@ -405,8 +405,8 @@ class Simulation:
         out.update(global_diagnostics(self))
         if len(self.walls.items):
             force = self.comm.allreduce(self.walls.force)
-            for k, f in enumerate(force):
+            for label, f in zip(self.walls.names, force):
                 for a, name in enumerate("xyz"[: self.dim]):
-                    out[f"wall{k}_force_{name}"] = f[a]
+                    out[f"{label}_force_{name}"] = f[a]
         out.update(probe_values(self.scene["probes"], self))
         return out

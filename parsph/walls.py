@@ -1,60 +1,102 @@
-"""Rigid frictionless walls: planes that particles of a group cannot cross.
+"""Rigid frictionless obstacles with prescribed motion: walls and tools.
 
 A wall is the plane through p(t) = point + velocity t with unit normal n pointing into the
-material, optionally limited to a box of current positions (a tool of finite width). After
-each drift a particle found behind the plane (gap (x - p) . n < 0) is put back on it and
-loses the part of its normal velocity that moves into the wall (relative to the wall): a
-perfectly plastic, frictionless contact, as of a rigid tool with prescribed motion
-([V §2.4.3]) or a symmetry plane that two colliding bodies press against ([V §2.4.2]).
-The impulse the wall gives per step, over the step, is its contact force.
+material, optionally limited to a box of current positions. A tool is a rigid box
+lower..upper moving at `velocity`, its edges rounded with `radius` (the signed distance of
+a rounded box: a smaller box grown by the radius), as the punch of [V §2.4.3].
+
+After each drift a particle of the obstacle's group found inside it (signed gap < 0) is
+put back on its surface along the outward normal n and loses the part of its velocity
+relative to the obstacle that moves into it: a perfectly plastic, frictionless contact
+(the tangential velocity is untouched). The impulse the obstacle gives per step, over the
+step, is its contact force.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 
-@dataclass
 class Wall:
-    index: np.ndarray  # owned particles that can touch it
-    point: np.ndarray
-    normal: np.ndarray  # unit, into the material
-    velocity: np.ndarray
-    lower: np.ndarray | None
-    upper: np.ndarray | None
+    """A moving plane, optionally acting only inside a box of current positions."""
+
+    prefix = "wall"
+
+    def __init__(self, spec: dict, index: np.ndarray):
+        self.index = index  # owned particles that can touch it
+        self.point = np.asarray(spec["point"], float)
+        normal = np.asarray(spec["normal"], float)
+        self.normal = normal / np.linalg.norm(normal)  # unit, into the material
+        self.velocity = np.asarray(spec["velocity"], float)
+        self.lower = None if spec["lower"] is None else np.asarray(spec["lower"], float)
+        self.upper = None if spec["upper"] is None else np.asarray(spec["upper"], float)
+
+    def contact(self, x: np.ndarray, t: float) -> tuple:
+        """(signed gaps, unit normals into the material) of the points x; gap < 0 inside."""
+        gap = (x - (self.point + self.velocity * t)) @ self.normal
+        if self.lower is not None:
+            outside = ~np.all((x >= self.lower) & (x <= self.upper), axis=1)
+            gap = np.where(outside, np.inf, gap)
+        return gap, np.broadcast_to(self.normal, x.shape)
+
+
+class Tool:
+    """A moving rigid box with rounded edges (radius r): the points within r of the box
+    shrunk by r on every side."""
+
+    prefix = "tool"
+
+    def __init__(self, spec: dict, index: np.ndarray):
+        self.index = index
+        lower, upper = np.asarray(spec["lower"], float), np.asarray(spec["upper"], float)
+        self.center = 0.5 * (lower + upper)
+        self.radius = float(spec["radius"])
+        self.core = 0.5 * (upper - lower) - self.radius  # half-sizes of the shrunk box
+        self.velocity = np.asarray(spec["velocity"], float)
+
+    def contact(self, x: np.ndarray, t: float) -> tuple:
+        rel = x - (self.center + self.velocity * t)
+        side = np.where(rel < 0.0, -1.0, 1.0)
+        q = np.abs(rel) - self.core  # > 0 along the axes on which x is beyond the core
+        beyond = np.maximum(q, 0.0)
+        out = np.linalg.norm(beyond, axis=1)
+        deepest = np.max(q, axis=1)
+        gap = out + np.minimum(deepest, 0.0) - self.radius
+        normal = np.zeros_like(x)
+        corner = out > 0.0
+        normal[corner] = beyond[corner] / out[corner, None]
+        face = np.flatnonzero(~corner)  # inside the core: out through the nearest face
+        normal[face, np.argmax(q[face], axis=1)] = 1.0
+        return gap, normal * side
 
 
 class Walls:
-    """The scene's walls acting on this rank's owned particles."""
+    """The scene's walls and tools acting on this rank's owned particles."""
 
-    def __init__(self, specs: list, masks: dict):
-        self.items = []
-        for spec in specs:
-            normal = np.asarray(spec["normal"], float)
-            self.items.append(Wall(
-                index=np.flatnonzero(masks[spec["group"]]), point=np.asarray(spec["point"], float),
-                normal=normal / np.linalg.norm(normal), velocity=np.asarray(spec["velocity"], float),
-                lower=None if spec["lower"] is None else np.asarray(spec["lower"], float),
-                upper=None if spec["upper"] is None else np.asarray(spec["upper"], float)))
-        self.force = np.zeros((len(self.items), len(specs[0]["point"]) if specs else 0))
+    def __init__(self, walls: list, tools: list, masks: dict):
+        self.items = ([Wall(s, np.flatnonzero(masks[s["group"]])) for s in walls]
+                      + [Tool(s, np.flatnonzero(masks[s["group"]])) for s in tools])
+        counts = {"wall": 0, "tool": 0}
+        self.names = []
+        for item in self.items:
+            self.names.append(f"{item.prefix}{counts[item.prefix]}")
+            counts[item.prefix] += 1
+        dim = len(walls[0]["point"]) if walls else len(tools[0]["lower"]) if tools else 0
+        self.force = np.zeros((len(self.items), dim))
 
     def enforce(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float,
                 dt: float) -> None:
-        """Project owned particles behind a wall back onto it; record each wall's force."""
-        for k, w in enumerate(self.items):
+        """Put owned particles found inside an obstacle back on its surface; record each
+        obstacle's force on the particles."""
+        for k, item in enumerate(self.items):
             self.force[k] = 0.0
-            sel = w.index
-            x = X[sel] + u[sel]
-            gap = (x - (w.point + w.velocity * t)) @ w.normal
+            sel = item.index
+            gap, normal = item.contact(X[sel] + u[sel], t)
             hit = gap < 0.0
-            if w.lower is not None:
-                hit &= np.all((x >= w.lower) & (x <= w.upper), axis=1)
             if not hit.any():
                 continue
-            sel = sel[hit]
-            u[sel] -= gap[hit, None] * w.normal
-            approach = np.minimum((v[sel] - w.velocity) @ w.normal, 0.0)
-            v[sel] -= approach[:, None] * w.normal
-            self.force[k] = -np.sum(mass[sel] * approach) * w.normal / dt
+            sel, gap, normal = sel[hit], gap[hit], normal[hit]
+            u[sel] -= gap[:, None] * normal
+            approach = np.minimum(np.einsum("na,na->n", v[sel] - item.velocity, normal), 0.0)
+            v[sel] -= approach[:, None] * normal
+            self.force[k] = -np.einsum("n,na->a", mass[sel] * approach, normal) / dt
