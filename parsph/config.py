@@ -378,35 +378,35 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         _vector_len(f"bc[{i}].value", bc["value"], dim)
         scene["bc"].append(bc)
 
-    scene["walls"] = []
-    for i, t in enumerate(_array("walls", raw.get("walls"))):
-        wall = _table(f"walls[{i}]", t, WALL_KEYS, dim)
-        check_group(f"walls[{i}].group", wall["group"])
-        if wall["velocity"] is None:
-            wall["velocity"] = [0.0] * dim
-        for key in ("point", "normal", "velocity", "lower", "upper"):
-            _vector_len(f"walls[{i}].{key}", wall[key], dim)
+    def obstacles(section: str, keys: dict, vectors: tuple) -> list:
+        """The [[walls]] or [[tools]] tables: group checked, velocity defaulted to rest,
+        vector lengths checked."""
+        out = []
+        for i, t in enumerate(_array(section, raw.get(section))):
+            item = _table(f"{section}[{i}]", t, keys, dim)
+            check_group(f"{section}[{i}].group", item["group"])
+            if item["velocity"] is None:
+                item["velocity"] = [0.0] * dim
+            for key in vectors:
+                _vector_len(f"{section}[{i}].{key}", item[key], dim)
+            out.append(item)
+        return out
+
+    scene["walls"] = obstacles("walls", WALL_KEYS, ("point", "normal", "velocity", "lower", "upper"))
+    for i, wall in enumerate(scene["walls"]):
         if not any(c != 0 for c in wall["normal"]):
             raise InputError(f"walls[{i}].normal must not be zero")
         if (wall["lower"] is None) != (wall["upper"] is None):
             raise InputError(f"walls[{i}]: give both lower and upper, or neither")
-        scene["walls"].append(wall)
 
-    scene["tools"] = []
-    for i, t in enumerate(_array("tools", raw.get("tools"))):
-        tool = _table(f"tools[{i}]", t, TOOL_KEYS, dim)
-        check_group(f"tools[{i}].group", tool["group"])
-        if tool["velocity"] is None:
-            tool["velocity"] = [0.0] * dim
-        for key in ("lower", "upper", "velocity"):
-            _vector_len(f"tools[{i}].{key}", tool[key], dim)
+    scene["tools"] = obstacles("tools", TOOL_KEYS, ("lower", "upper", "velocity"))
+    for i, tool in enumerate(scene["tools"]):
         smallest = min(b - a for a, b in zip(tool["lower"], tool["upper"]))
         if smallest <= 0:
             raise InputError(f"tools[{i}]: upper must exceed lower in every component")
         if tool["radius"] > 0.5 * smallest:
             raise InputError(f"tools[{i}].radius = {tool['radius']:g} exceeds half the tool's smallest "
                              f"side ({0.5 * smallest:g})")
-        scene["tools"].append(tool)
 
     scene["initial"] = []
     for i, t in enumerate(_array("initial", raw.get("initial"))):

@@ -129,7 +129,7 @@ class Simulation:
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.youngs = np.full(keep, self.constants.youngs)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
-        self.walls = Walls(self.scene["walls"], self.scene["tools"], self.groups)
+        self.walls = Walls(self.scene["walls"], self.scene["tools"], self.groups, dim)
         self._omega_hg2 = self._hourglass_frequencies()
 
     def _hourglass_frequencies(self) -> np.ndarray:

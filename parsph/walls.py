@@ -20,8 +20,6 @@ import numpy as np
 class Wall:
     """A moving plane, optionally acting only inside a box of current positions."""
 
-    prefix = "wall"
-
     def __init__(self, spec: dict, index: np.ndarray):
         self.index = index  # owned particles that can touch it
         self.point = np.asarray(spec["point"], float)
@@ -43,8 +41,6 @@ class Wall:
 class Tool:
     """A moving rigid box with rounded edges (radius r): the points within r of the box
     shrunk by r on every side."""
-
-    prefix = "tool"
 
     def __init__(self, spec: dict, index: np.ndarray):
         self.index = index
@@ -73,15 +69,10 @@ class Tool:
 class Walls:
     """The scene's walls and tools acting on this rank's owned particles."""
 
-    def __init__(self, walls: list, tools: list, masks: dict):
+    def __init__(self, walls: list, tools: list, masks: dict, dim: int):
         self.items = ([Wall(s, np.flatnonzero(masks[s["group"]])) for s in walls]
                       + [Tool(s, np.flatnonzero(masks[s["group"]])) for s in tools])
-        counts = {"wall": 0, "tool": 0}
-        self.names = []
-        for item in self.items:
-            self.names.append(f"{item.prefix}{counts[item.prefix]}")
-            counts[item.prefix] += 1
-        dim = len(walls[0]["point"]) if walls else len(tools[0]["lower"]) if tools else 0
+        self.names = [f"wall{k}" for k in range(len(walls))] + [f"tool{k}" for k in range(len(tools))]
         self.force = np.zeros((len(self.items), dim))
 
     def enforce(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float,
