@@ -192,6 +192,10 @@ TOOL_KEYS = {
     "radius": Key("float", 0.0, non_negative, "radius of the rounded edges [m]"),
     "velocity": Key("vector", None, doc="the tool's prescribed velocity [m/s] (default at rest)"),
 }
+SYMMETRY_KEYS = {
+    "axis": Key("int", REQUIRED, doc="the plane's normal axis (0 = x, 1 = y, 2 = z)"),
+    "position": Key("float", REQUIRED, doc="the plane's coordinate on that axis [m]"),
+}
 INITIAL_KEYS = {
     "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient")),
     "group": Key("str", "all"),
@@ -208,7 +212,8 @@ PROBE_KEYS = {
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
-TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "tools", "initial", "probes")
+TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "tools", "symmetry", "initial",
+                               "probes")
 
 
 def _suggest(name: str, known) -> str:
@@ -408,6 +413,15 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
             raise InputError(f"tools[{i}].radius = {tool['radius']:g} exceeds half the tool's smallest "
                              f"side ({0.5 * smallest:g})")
 
+    scene["symmetry"] = [_table(f"symmetry[{i}]", t, SYMMETRY_KEYS, dim)
+                         for i, t in enumerate(_array("symmetry", raw.get("symmetry")))]
+    axes = [plane["axis"] for plane in scene["symmetry"]]
+    for i, axis in enumerate(axes):
+        if not 0 <= axis < dim:
+            raise InputError(f"symmetry[{i}].axis = {axis} must be in [0, {dim - 1}]")
+        if axis in axes[:i]:
+            raise InputError(f"symmetry[{i}]: a second symmetry plane on axis {axis} (one per axis)")
+
     scene["initial"] = []
     for i, t in enumerate(_array("initial", raw.get("initial"))):
         ic = _table(f"initial[{i}]", t, INITIAL_KEYS, dim)
@@ -527,6 +541,11 @@ def validate(raw: dict) -> dict:
         raise InputError("formulation.update_every/update_strain apply to formulation.type = 'ulsph' only")
     scene["groups"] = _validate_groups(raw.get("groups"), dim)
     _validate_lists(scene, raw, dim)
+    if scene["symmetry"] and form["hessian"] > 0:
+        raise InputError(
+            "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
+            "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
+            "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 

@@ -28,6 +28,7 @@ from parsph.errors import InputError, ParsphError
 from parsph.formulations import reference, tlsph
 from parsph.materials.elastic import MODEL_IDS, first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
+from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.walls import Walls
 
@@ -91,12 +92,15 @@ class Simulation:
     # ----------------------------------------------------------------- set-up helpers
     def _adopt(self, local: LocalBody) -> None:
         """Take `local` (owned particles with two ghost layers and all their arrays) as this
-        rank's particles: halo plan, reference data in the reference configuration (X, or
-        X^r when updated), state and work arrays for owned particles and layer-1 ghosts."""
-        fl, n, dim = local.fields, local.n_owned, self.dim
-        ref = ("Xr", "measure_r", "volume_r") if self.updated and "Xr" in fl else ("X", "measure", "volume")
+        rank's particles: mirror images across symmetry planes (parallel.mirrors), halo plan,
+        reference data in the reference configuration (X, or X^r when updated), state and
+        work arrays for owned particles and layer-1 ghosts."""
+        updated = self.updated and "Xr" in local.fields
+        ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
         with collective(self.comm):
-            self.decomp = Decomposition(local, self.comm)
+            local, mirrors = add_images(local, ref[0], self.scene["symmetry"], self.comm)
+            fl, n, dim = local.fields, local.n_owned, self.dim
+            self.decomp = Decomposition(local, self.comm, mirrors)
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], self.hourglass_form, self.alpha, self.eta)
@@ -292,6 +296,7 @@ class Simulation:
                 owned = partition(owned, "Xr", self.comm)
         with collective(self.comm):
             local = add_ghosts(owned, "Xr", self.comm)
+        contact = self.walls.force.copy()  # this step's obstacle forces, for the history
         try:
             self._adopt(local)
         except InputError as exc:  # the configuration, not the input, is at fault
@@ -301,6 +306,7 @@ class Simulation:
                 "(formulation.update_strain), raise the stabilisation or refine the particles")
             error.agreed = getattr(exc, "agreed", False)
             raise error from None
+        self.walls.force[:] = contact
         self.stage_seconds["reference update"] += time.perf_counter() - start
         self.compute_forces()
         self._external = self.external_force()

@@ -187,8 +187,11 @@ def add_ghosts(owned: dict, position: str, comm) -> LocalBody:
 class Decomposition:
     """This rank's owned and ghost particles and the plan to refresh ghost values."""
 
-    def __init__(self, local: LocalBody, comm):
+    def __init__(self, local: LocalBody, comm, mirrors=None):
+        """`mirrors` (parallel.mirrors.Mirrors): the layer-1 mirror images, refreshed from
+        their sources after the exchange; their owner is -1."""
         self.comm = comm
+        self.mirrors = mirrors
         size, me = comm.size, comm.rank
         self.n_owned = local.n_owned
         self.n_ghost = local.n_ghost
@@ -196,8 +199,9 @@ class Decomposition:
         self.total = local.total
         self.local_gid = local.gid
         owned = local.gid[: self.n_owned]
-        layer1 = local.gid[self.n_owned: self.n_rows]
         owner1 = local.owner[self.n_owned: self.n_rows]
+        layer1 = local.gid[self.n_owned: self.n_rows][owner1 >= 0]
+        owner1 = owner1[owner1 >= 0]
         # receive plan: contiguous ghost block per owner rank
         self.recv_slices = {}
         start = self.n_owned
@@ -217,23 +221,28 @@ class Decomposition:
         self.local_gid = self.local_gid[: self.n_rows]
 
     def refresh(self, *arrays: np.ndarray) -> None:
-        """Copy owners' values of `arrays` (indexed by local particle) into the ghost slots."""
+        """Copy owners' values of `arrays` (indexed by local particle) into the ghost slots,
+        then the reflected values of the mirror images' sources into theirs."""
+        for arr in arrays:
+            self._exchange(arr)
+            if self.mirrors is not None:
+                self.mirrors.fill(arr)
+
+    def _exchange(self, arr: np.ndarray) -> None:
+        """Copy owners' values of `arr` into the ghost slots (MPI)."""
         if not self.recv_slices and not self.send_index:
             return
-        from mpi4py import MPI
-
-        for arr in arrays:
-            requests = []
-            buffers = []
-            for r, sl in self.recv_slices.items():
-                buf = np.empty((sl.stop - sl.start,) + arr.shape[1:], arr.dtype)
-                buffers.append((sl, buf))
-                requests.append(self.comm.Irecv(buf, source=r, tag=7))
-            sends = []
-            for r, index in self.send_index.items():
-                data = np.ascontiguousarray(arr[index])
-                sends.append(data)
-                requests.append(self.comm.Isend(data, dest=r, tag=7))
-            MPI.Request.Waitall(requests)
-            for sl, buf in buffers:
-                arr[sl] = buf
+        requests = []
+        buffers = []
+        for r, sl in self.recv_slices.items():
+            buf = np.empty((sl.stop - sl.start,) + arr.shape[1:], arr.dtype)
+            buffers.append((sl, buf))
+            requests.append(self.comm.Irecv(buf, source=r, tag=7))
+        sends = []
+        for r, index in self.send_index.items():
+            data = np.ascontiguousarray(arr[index])
+            sends.append(data)
+            requests.append(self.comm.Isend(data, dest=r, tag=7))
+        MPI.Request.Waitall(requests)
+        for sl, buf in buffers:
+            arr[sl] = buf

@@ -1,0 +1,148 @@
+"""Symmetry planes by mirror images (scene `[[symmetry]]`).
+
+A body symmetric about axis-aligned planes is computed on one side of them only, as the
+punch of [V §2.4.3] is on a quarter of its domain. Every particle within a kernel support
+of a plane gets a mirror image beyond it (and an image across two or three planes near
+their corner). Images join the neighbour search, the corrections and the sums like ghosts
+do, with reflected values, so the particles near a plane have full neighbourhoods and move
+as those of the whole body would; no component is held fixed and no kernel is cut.
+
+Images are layered like the ghosts of parallel.decomposition: layer-1 images (neighbours
+of owned particles) come after the layer-1 ghosts and are refreshed from their source
+particle (owned or a layer-1 ghost) after each ghost exchange; layer-2 images come after
+the layer-2 ghosts and only serve to build the layer-1 rows. An image's global id is its
+source's plus a multiple of the particle count, so sums over rows keep an order that does
+not depend on the rank count. A particle on a plane (within 1e-9 supports) has no image:
+hold its normal component with a fixed condition.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+from scipy.spatial import cKDTree
+
+from parsph.errors import InputError, ParsphError
+from parsph.parallel.decomposition import LocalBody
+
+POSITIONS = ("X", "Xr")  # per-particle fields reflected as points
+VECTORS = ("u", "v")  # reflected as vectors
+TENSORS = ("Fr",)  # reflected on both indices; every other field is copied
+
+
+@dataclass
+class Mirrors:
+    """The layer-1 images of a rank's local arrays and how to refresh them."""
+
+    start: int  # local row of the first layer-1 image
+    source: np.ndarray  # local row of each layer-1 image's particle
+    sign: np.ndarray  # (images, dim): the reflection, +1 or -1 per component
+
+    def fill(self, arr: np.ndarray) -> None:
+        """Set the layer-1 image rows of `arr` (scalars, vectors or tensors per particle)
+        to their sources' values, reflected."""
+        if not len(self.source):
+            return
+        value = arr[self.source]
+        if arr.ndim == 2:
+            value = value * self.sign
+        elif arr.ndim == 3:
+            value = value * self.sign[:, :, None] * self.sign[:, None, :]
+        arr[self.start: self.start + len(self.source)] = value
+
+
+def no_mirrors(local: LocalBody) -> Mirrors:
+    dim = local.fields["X"].shape[1]
+    return Mirrors(local.n_owned + local.n_ghost, np.zeros(0, np.int64), np.zeros((0, dim)))
+
+
+def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
+    """+1 or -1 for each plane: the side of it the body `x` (owned positions) lies on;
+    InputError if a plane cuts the body."""
+    sides = []
+    for i, plane in enumerate(planes):
+        s = x[:, plane["axis"]] - plane["position"]
+        lo = comm.allreduce(float(s.min()) if len(s) else np.inf, op=MPI.MIN)
+        hi = comm.allreduce(float(s.max()) if len(s) else -np.inf, op=MPI.MAX)
+        if (lo < -tol and hi > tol) or (lo >= -tol and hi <= tol):
+            raise InputError(
+                f"symmetry[{i}]: the plane at coordinate {plane['position']:g} on axis {plane['axis']} "
+                f"must bound the body, but the particles lie from {lo:+.6g} to {hi:+.6g} of it")
+        sides.append(1.0 if hi > tol else -1.0)
+    return sides
+
+
+def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[LocalBody, Mirrors]:
+    """`local` with the mirror images across `planes` (scene["symmetry"]) of its particles
+    in the configuration `fields[position]` added as two layers; and their refresh plan."""
+    if not planes:
+        return local, no_mirrors(local)
+    fields, n, n1 = local.fields, local.n_owned, local.n_owned + local.n_ghost
+    x = fields[position]
+    dim = x.shape[1]
+    reach = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
+    tol = 1e-9 * reach
+    sides = body_sides(x[:n], planes, tol, comm)
+    source, sign, image_x, gid = [], [], [], []
+    subsets = [s for k in range(1, len(planes) + 1) for s in itertools.combinations(range(len(planes)), k)]
+    for k, subset in enumerate(subsets, start=1):
+        near = np.ones(len(x), bool)
+        flip = np.ones(dim)
+        for p in subset:
+            gap = sides[p] * (x[:, planes[p]["axis"]] - planes[p]["position"])
+            near &= (gap > tol) & (gap < 2.0 * reach)  # layer-2 images lie within two supports
+            flip[planes[p]["axis"]] = -1.0
+        rows = np.flatnonzero(near)
+        moved = x[rows].copy()
+        for p in subset:
+            a = planes[p]["axis"]
+            moved[:, a] = 2.0 * planes[p]["position"] - moved[:, a]
+        source.append(rows)
+        sign.append(np.broadcast_to(flip, (len(rows), dim)))
+        image_x.append(moved)
+        gid.append(fields["gid"][rows] + k * local.total)
+    source, sign = np.concatenate(source), np.concatenate(sign)
+    image_x, gid = np.concatenate(image_x), np.concatenate(gid)
+    layer1 = layer2 = np.zeros(0, np.int64)
+    if n and len(source):
+        dist, _ = cKDTree(x[:n]).query(image_x, distance_upper_bound=reach)
+        layer1 = np.flatnonzero(np.isfinite(dist))
+        rest = np.flatnonzero(~np.isfinite(dist))
+        inner = np.concatenate([x[n:n1], image_x[layer1]])
+        if len(inner) and len(rest):
+            dist, _ = cKDTree(inner).query(image_x[rest], distance_upper_bound=reach)
+            layer2 = rest[np.isfinite(dist)]
+    layer1 = layer1[np.argsort(gid[layer1], kind="stable")]
+    layer2 = layer2[np.argsort(gid[layer2], kind="stable")]
+    if (source[layer1] >= n1).any():
+        raise ParsphError("internal: a layer-1 mirror image's source is not an owned or layer-1 particle")
+
+    def images(which: np.ndarray) -> dict:
+        out = {}
+        for key, arr in fields.items():
+            value = arr[source[which]]
+            if key == "gid":
+                value = gid[which]
+            elif key in POSITIONS:
+                value = value.copy()
+                for p in planes:
+                    a = p["axis"]
+                    mirrored = sign[which, a] < 0
+                    value[mirrored, a] = 2.0 * p["position"] - value[mirrored, a]
+            elif key in VECTORS:
+                value = value * sign[which]
+            elif key in TENSORS:
+                value = value * sign[which][:, :, None] * sign[which][:, None, :]
+            out[key] = value
+        return out
+
+    first, second = images(layer1), images(layer2)
+    merged = {k: np.concatenate([v[:n1], first[k], v[n1:], second[k]]) for k, v in fields.items()}
+    none = np.full(len(layer1), -1, np.int64)
+    owner = np.concatenate([local.owner[:n1], none, local.owner[n1:], np.full(len(layer2), -1, np.int64)])
+    body = LocalBody(gid=merged["gid"], owner=owner, n_owned=n, n_ghost=local.n_ghost + len(layer1),
+                     total=local.total, fields=merged)
+    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]))
