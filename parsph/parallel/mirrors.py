@@ -1,9 +1,9 @@
 """Symmetry planes by mirror images (scene `[[symmetry]]`).
 
 A body symmetric about axis-aligned planes is computed on one side of them only, as the
-punch of [V §2.4.3] is on a quarter of its domain. Every particle within a kernel support
-of a plane gets a mirror image beyond it (and an image across two or three planes near
-their corner). Images join the neighbour search, the corrections and the sums like ghosts
+punch of [V §2.4.3] is on a quarter of its domain. Every particle within two kernel
+supports of a plane gets a mirror image beyond it (and an image across two or three planes
+near their corner). Images join the neighbour search, the corrections and the sums like ghosts
 do, with reflected values, so the particles near a plane have full neighbourhoods and move
 as those of the whole body would; no component is held fixed and no kernel is cut.
 
