@@ -71,6 +71,7 @@ class Simulation:
         self.hourglass_energy_local = 0.0
         self.hourglass_released_local = 0.0  # penalty energy dropped at reference updates
         self.external_work_local = 0.0
+        self.walls = Walls(scene["walls"], scene["tools"], dim)
         self._adopt(local)
         n = self.n_owned
         if restart is None:
@@ -133,7 +134,7 @@ class Simulation:
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.youngs = np.full(keep, self.constants.youngs)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
-        self.walls = Walls(self.scene["walls"], self.scene["tools"], self.groups, dim)
+        self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
 
     def _hourglass_frequencies(self) -> np.ndarray:
@@ -296,7 +297,6 @@ class Simulation:
                 owned = partition(owned, "Xr", self.comm)
         with collective(self.comm):
             local = add_ghosts(owned, "Xr", self.comm)
-        contact = self.walls.force.copy()  # this step's obstacle forces, for the history
         try:
             self._adopt(local)
         except InputError as exc:  # the configuration, not the input, is at fault
@@ -306,7 +306,6 @@ class Simulation:
                 "(formulation.update_strain), raise the stabilisation or refine the particles")
             error.agreed = getattr(exc, "agreed", False)
             raise error from None
-        self.walls.force[:] = contact
         self.stage_seconds["reference update"] += time.perf_counter() - start
         self.compute_forces()
         self._external = self.external_force()

@@ -20,8 +20,9 @@ import numpy as np
 class Wall:
     """A moving plane, optionally acting only inside a box of current positions."""
 
-    def __init__(self, spec: dict, index: np.ndarray):
-        self.index = index  # owned particles that can touch it
+    def __init__(self, spec: dict):
+        self.group = spec["group"]  # the particles that can touch it
+        self.index = np.zeros(0, np.int64)  # of them, the owned ones (Walls.select)
         self.point = np.asarray(spec["point"], float)
         normal = np.asarray(spec["normal"], float)
         self.normal = normal / np.linalg.norm(normal)  # unit, into the material
@@ -42,8 +43,9 @@ class Tool:
     """A moving rigid box with rounded edges (radius r): the points within r of the box
     shrunk by r on every side."""
 
-    def __init__(self, spec: dict, index: np.ndarray):
-        self.index = index
+    def __init__(self, spec: dict):
+        self.group = spec["group"]
+        self.index = np.zeros(0, np.int64)
         lower, upper = np.asarray(spec["lower"], float), np.asarray(spec["upper"], float)
         self.center = 0.5 * (lower + upper)
         self.radius = float(spec["radius"])
@@ -69,11 +71,16 @@ class Tool:
 class Walls:
     """The scene's walls and tools acting on this rank's owned particles."""
 
-    def __init__(self, walls: list, tools: list, masks: dict, dim: int):
-        self.items = ([Wall(s, np.flatnonzero(masks[s["group"]])) for s in walls]
-                      + [Tool(s, np.flatnonzero(masks[s["group"]])) for s in tools])
+    def __init__(self, walls: list, tools: list, dim: int):
+        self.items = [Wall(s) for s in walls] + [Tool(s) for s in tools]
         self.names = [f"wall{k}" for k in range(len(walls))] + [f"tool{k}" for k in range(len(tools))]
-        self.force = np.zeros((len(self.items), dim))
+        self.force = np.zeros((len(self.items), dim))  # of the last step, kept across select
+
+    def select(self, masks: dict) -> None:
+        """Find each obstacle's particles among this rank's owned ones (group name -> bool
+        mask over them); again whenever ownership changes."""
+        for item in self.items:
+            item.index = np.flatnonzero(masks[item.group])
 
     def enforce(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float,
                 dt: float) -> None:

@@ -15,7 +15,8 @@ def test_tool_puts_particles_on_its_rounded_surface_and_keeps_their_tangential_v
     radially onto the arc; each keeps its tangential velocity and takes the tool's normal
     velocity; a particle outside is left alone."""
     spec = {"group": "all", "lower": [0.0, 0.0], "upper": [2.0, 1.0], "radius": 0.25, "velocity": [0.0, -1.0]}
-    walls = Walls([], [spec], {"all": np.ones(3, bool)}, 2)
+    walls = Walls([], [spec], 2)
+    walls.select({"all": np.ones(3, bool)})
     center = np.array([0.25, -0.25])  # the arc's centre at t = 0.5
     direction = np.array([-1.0, -2.0]) / np.sqrt(5.0)
     X = np.array([[1.0, -0.45], center + 0.2 * direction, [1.0, -0.6]])

@@ -54,11 +54,6 @@ class Mirrors:
         arr[self.start: self.start + len(self.source)] = value
 
 
-def no_mirrors(local: LocalBody) -> Mirrors:
-    dim = local.fields["X"].shape[1]
-    return Mirrors(local.n_owned + local.n_ghost, np.zeros(0, np.int64), np.zeros((0, dim)))
-
-
 def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
     """+1 or -1 for each plane: the side of it the body `x` (owned positions) lies on;
     InputError if a plane cuts the body."""
@@ -75,18 +70,22 @@ def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
     return sides
 
 
-def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[LocalBody, Mirrors]:
+def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[LocalBody, Mirrors | None]:
     """`local` with the mirror images across `planes` (scene["symmetry"]) of its particles
-    in the configuration `fields[position]` added as two layers; and their refresh plan."""
+    in the configuration `fields[position]` added as two layers; and their refresh plan
+    (None without planes)."""
     if not planes:
-        return local, no_mirrors(local)
+        return local, None
     fields, n, n1 = local.fields, local.n_owned, local.n_owned + local.n_ghost
     x = fields[position]
     dim = x.shape[1]
     reach = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
     tol = 1e-9 * reach
     sides = body_sides(x[:n], planes, tol, comm)
-    source, sign, image_x, gid = [], [], [], []
+    plane_at = np.zeros(dim)  # a point on every plane
+    for p in planes:
+        plane_at[p["axis"]] = p["position"]
+    source, sign, gid = [], [], []
     subsets = [s for k in range(1, len(planes) + 1) for s in itertools.combinations(range(len(planes)), k)]
     for k, subset in enumerate(subsets, start=1):
         near = np.ones(len(x), bool)
@@ -96,16 +95,12 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
             near &= (gap > tol) & (gap < 2.0 * reach)  # layer-2 images lie within two supports
             flip[planes[p]["axis"]] = -1.0
         rows = np.flatnonzero(near)
-        moved = x[rows].copy()
-        for p in subset:
-            a = planes[p]["axis"]
-            moved[:, a] = 2.0 * planes[p]["position"] - moved[:, a]
         source.append(rows)
         sign.append(np.broadcast_to(flip, (len(rows), dim)))
-        image_x.append(moved)
         gid.append(fields["gid"][rows] + k * local.total)
-    source, sign = np.concatenate(source), np.concatenate(sign)
-    image_x, gid = np.concatenate(image_x), np.concatenate(gid)
+    source, sign, gid = np.concatenate(source), np.concatenate(sign), np.concatenate(gid)
+    offset = (1.0 - sign) * plane_at  # a point p reflects to sign * p + offset
+    image_x = sign * x[source] + offset
     layer1 = layer2 = np.zeros(0, np.int64)
     if n and len(source):
         dist, _ = cKDTree(x[:n]).query(image_x, distance_upper_bound=reach)
@@ -127,11 +122,7 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
             if key == "gid":
                 value = gid[which]
             elif key in POSITIONS:
-                value = value.copy()
-                for p in planes:
-                    a = p["axis"]
-                    mirrored = sign[which, a] < 0
-                    value[mirrored, a] = 2.0 * p["position"] - value[mirrored, a]
+                value = sign[which] * value + offset[which]
             elif key in VECTORS:
                 value = value * sign[which]
             elif key in TENSORS:
