@@ -103,6 +103,10 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "type": Key("str", "tlsph", one_of("tlsph", "ulsph"),
                     "tlsph: total-Lagrangian; ulsph: updated reference [V §3.1]"),
         "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
+        "hessian_correction": Key("str", "weighted", one_of("weighted", "paper"),
+                                  "linear correction of the kernel Hessian: weighted: the A term "
+                                  "weighted by the kernel (continuous as neighbours enter the "
+                                  "support); paper: unweighted [V eq. 19]"),
         "update_every": Key("int", 0, non_negative, "ulsph: update the reference every N steps (0 = off)"),
         "update_strain": Key("float", 0.0, non_negative,
                              "ulsph: update when the largest principal log strain since the reference "

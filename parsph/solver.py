@@ -104,7 +104,8 @@ class Simulation:
             self.decomp = Decomposition(local, self.comm, mirrors)
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
-                self.scene["kernel"]["type"], self.hourglass_form, self.alpha, self.eta)
+                self.scene["kernel"]["type"], self.hourglass_form, self.alpha, self.eta,
+                self.scene["formulation"]["hessian_correction"] == "weighted")
         self.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
         keep = self.decomp.n_rows
         self.n_owned = n

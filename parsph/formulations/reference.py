@@ -5,7 +5,8 @@ in the updated one [V §3.1]: neighbours (neighbors.find_pairs), corrected gradi
 g_ij = V_j L_i^-1 grad W [V eq. 13] with their reverse g_ji and row sums, hourglass
 coefficients [G eq. 31], and for Hessian's-difference stabilisation [V eq. 17, 21]
 
-    q_ij  = eta Hc_ij h_i        (corrected kernel Hessian times the vector h, kernels.hessian)
+    q_ij  = eta Hc_ij h_i        (corrected kernel Hessian times the vector h, kernels.hessian,
+                                  its A term weighted by the kernel unless `weighted_hessian` is off)
     gh_ij = eta g_ij . h_i
 
 with h_i = (l_i, ..., l_i) and l_i = support_i / 2, the smoothing length (Remark 2: equal
@@ -48,7 +49,7 @@ class ReferenceData:
 
 
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str,
-          hourglass_form: int, alpha: float, eta: float) -> ReferenceData:
+          hourglass_form: int, alpha: float, eta: float, weighted_hessian: bool) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
     and layer-1 ghosts) are built to provide the reverse coefficients g_ji."""
     pairs = find_pairs(X, support, gid, n_rows)
@@ -71,7 +72,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     if eta > 0:
         hvec = 0.5 * support[: n_rows]
         row_all = pairs.row_of_pair()
-        Hc = corrected_hessians(pairs, ref.dx, ref.h, measure, gid, kernel)
+        Hc = corrected_hessians(pairs, ref.dx, ref.h, measure, gid, kernel, weighted_hessian)
         q_all = eta * hvec[row_all, None] * np.einsum("pab->pa", Hc)
         gh_all = eta * hvec[row_all] * np.einsum("pa->p", ref.g)
         rev = ref.rev[:end]
