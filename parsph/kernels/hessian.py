@@ -12,9 +12,10 @@ with w_k = 1 as printed in [V eq. 19] ("paper"), or w_k = W_k ("weighted", the d
 The printed A term gives every neighbour the same weight whatever its distance, so the
 corrected Hessian jumps when a neighbour enters or leaves the support: harmless in a total-
 Lagrangian run, whose neighbours never change, but at every reference update of the
-updated formulation it kicks the particles (on the punch one step after an update, a
-force jump of 3.7e4 m/s^2 at a particle whose neighbour set changed; 580 weighted). H_k
-and W_k vanish at the support's edge, so the weighted form is continuous.
+updated formulation it kicks the particles (on the punch, an update one step after the
+last changes the acceleration of a particle whose neighbour set changed by 3.7e4 m/s^2;
+weighted, no particle's by more than 580 m/s^2). H_k and W_k vanish at the support's
+edge, so the weighted form is continuous.
 
 The self coefficient is -sum_k Hc_ik (it carries the B term of [V eq. 20]), so the Hessian
 of a field psi at x_i is  sum_k (psi_k - psi_i) Hc_ik,  which is exactly zero for constant
