@@ -53,6 +53,7 @@ class Simulation:
         self.pair_form = form["force_form"] == "pair"
         self.updated = form["type"] == "ulsph"
         self.eta = form["hessian"]
+        self.weighted_hessian = form["hessian_correction"] == "weighted"
         self.update_every, self.update_strain = form["update_every"], form["update_strain"]
         self.rebalance = scene["parallel"]["rebalance"]
         self.group_names = sorted(scene["groups"])
@@ -105,7 +106,7 @@ class Simulation:
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], self.hourglass_form, self.alpha, self.eta,
-                self.scene["formulation"]["hessian_correction"] == "weighted")
+                self.weighted_hessian)
         self.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
         keep = self.decomp.n_rows
         self.n_owned = n

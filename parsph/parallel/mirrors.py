@@ -47,11 +47,15 @@ class Mirrors:
         if not len(self.source):
             return
         value = arr[self.source]
-        if arr.ndim == 2:
-            value = value * self.sign
-        elif arr.ndim == 3:
-            value = value * self.sign[:, :, None] * self.sign[:, None, :]
-        arr[self.start: self.start + len(self.source)] = value
+        arr[self.start: self.start + len(self.source)] = value if arr.ndim == 1 else reflect(value, self.sign)
+
+
+def reflect(value: np.ndarray, sign: np.ndarray) -> np.ndarray:
+    """Vectors (n, d) or tensors (n, d, d) of n particles reflected by `sign` (n, d), +1 or -1
+    per component (tensors on both indices)."""
+    if value.ndim == 2:
+        return value * sign
+    return value * sign[:, :, None] * sign[:, None, :]
 
 
 def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
@@ -123,10 +127,8 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
                 value = gid[which]
             elif key in POSITIONS:
                 value = sign[which] * value + offset[which]
-            elif key in VECTORS:
-                value = value * sign[which]
-            elif key in TENSORS:
-                value = value * sign[which][:, :, None] * sign[which][:, None, :]
+            elif key in VECTORS or key in TENSORS:
+                value = reflect(value, sign[which])
             out[key] = value
         return out
 
