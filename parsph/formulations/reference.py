@@ -10,7 +10,9 @@ coefficients [G eq. 31], and for Hessian's-difference stabilisation [V eq. 17, 2
     gh_ij = eta g_ij . h_i
 
 with h_i = (l_i, ..., l_i) and l_i = support_i / 2, the smoothing length (Remark 2: equal
-components along the Cartesian axes, constant in time).
+components along the Cartesian axes, constant in time). Taking l_i = support_i, the paper's
+dilation parameter rho, doubles the stabilisation and was measured further from
+total-Lagrangian on the bar and the cylinder (README, Known gaps).
 """
 
 from __future__ import annotations
