@@ -3,9 +3,9 @@ masses, kernel supports, global ids and named groups.
 
 Each rank builds a contiguous block of the parts' particles (a part that exists only whole,
 the Voronoi random patch, is built by rank 0, which hands out the blocks); the ranks then
-send every particle to its owner (parallel RCB), drop particles coincident across parts,
-and find kernel supports and groups with neighbour exchanges and global reductions. No
-rank ever holds the whole set.
+send every particle to its owner (parallel RCB), drop particles coincident across parts
+(and warn of parts that overlap without coinciding), and find kernel supports and groups
+with neighbour exchanges and global reductions. No rank ever holds the whole set.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 from parsph import geometry
 from parsph.errors import InputError
 from parsph.parallel.decomposition import LocalBody, add_ghosts, block_cuts, nearby, partition
-from parsph.parallel.runtime import collective
+from parsph.parallel.runtime import collective, warn
 
 PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": geometry.Cylinder,
          "ring": geometry.Ring, "disk": geometry.Disk}
@@ -34,8 +34,11 @@ def _generators(scene: dict) -> list:
             part_dim = gens[-1].rows(0, 1)[0].shape[1]
             if part_dim != dim:
                 raise InputError(f"geometry.parts[{i}]: a {part_dim}D {part['shape']} in a {dim}D scene")
-    if sum(g.count for g in gens) == 0:
+    total = sum(g.count for g in gens)
+    if total == 0:
         raise InputError("geometry.parts produce zero particles; check the shapes' sizes and spacing")
+    if total > geometry.MAX_PARTICLES:
+        raise InputError(f"geometry.parts produce {total} particles in all, more than 2^31")
     return gens
 
 
@@ -65,16 +68,45 @@ def _block(gens: list, dim: int, comm) -> dict:
     return comm.scatter(blocks, root=0)
 
 
-def _drop_coincident(owned: dict, tol: float, comm) -> dict:
-    """Drop each particle closer than `tol` to one of a lower index (parts overlapping at
-    their surfaces) and renumber the global ids densely, keeping their order."""
-    near = nearby(owned, owned["X"], tol, comm)
-    drop = geometry.shadowed(owned["X"], owned["gid"], np.concatenate([owned["X"], near["X"]]),
-                             np.concatenate([owned["gid"], near["gid"]]), tol)
+def _part_spacing(part: dict) -> float:
+    """A part's nominal particle spacing: its lattice spacing, or (volume / count)^(1/D) for
+    a random patch."""
+    if "spacing" in part:
+        return part["spacing"]
+    size = np.subtract(part["upper"], part["lower"])
+    return float(np.prod(size) / part["count"]) ** (1.0 / len(size))
+
+
+def _join_parts(owned: dict, first: np.ndarray, spacing: np.ndarray, tol: float, comm):
+    """Drop each particle closer than `tol` to one of an earlier part (parts meeting at their
+    surfaces) and renumber the global ids densely, keeping their order. Parts are told apart
+    by the candidate index (part p holds first[p]..first[p+1]-1; `spacing` by part).
+
+    Returns the kept particles and `close`: close[q, p] kept particles of part p lie within
+    half the smaller spacing of parts p and q (to 1e-6 relative, a lattice's tolerance) of a
+    particle of the earlier part q, but do not coincide with it: the parts overlap. Parts
+    that touch lie a spacing apart (half the smaller one where a cell lattice meets a node
+    lattice, which is flagged too)."""
+    n_parts, n = len(spacing), len(owned["gid"])
+    limit = np.maximum(tol, 0.5 * (1.0 + 1e-6) * np.minimum.outer(spacing, spacing))
+    near = nearby(owned, owned["X"], limit[~np.eye(n_parts, dtype=bool)].max(), comm)
+    X = np.concatenate([owned["X"], near["X"]])
+    part = np.searchsorted(first, np.concatenate([owned["gid"], near["gid"]]), side="right") - 1
+    drop = np.zeros(n, dtype=bool)
+    found = []  # (q, p, owned particles of part p close to part q)
+    for p in range(1, n_parts):
+        mine = np.flatnonzero(part[:n] == p)
+        for q in range(p):
+            i, _, dist = geometry.close_pairs(X[mine], X[part == q], limit[q, p])
+            drop[mine[i[dist < tol]]] = True
+            found.append((q, p, np.unique(mine[i[dist >= tol]])))
+    close = np.zeros((n_parts, n_parts), np.int64)
+    for q, p, index in found:
+        close[q, p] = np.count_nonzero(~drop[index])
     dropped = np.sort(np.concatenate(comm.allgather(owned["gid"][drop])))
     kept = {k: v[~drop] for k, v in owned.items()}
     kept["gid"] = kept["gid"] - np.searchsorted(dropped, kept["gid"])
-    return kept
+    return kept, comm.allreduce(close)
 
 
 def _spacing(parts: list, measure: np.ndarray, dim: int) -> np.ndarray:
@@ -122,7 +154,14 @@ def build_particles(scene: dict, comm) -> dict:
     if len(gens) > 1:
         smallest = min(m for m in comm.allgather(float(owned["measure"].min()) if len(owned["X"]) else None)
                        if m is not None)
-        owned = _drop_coincident(owned, 1e-6 * smallest ** (1.0 / dim), comm)
+        parts = scene["geometry"]["parts"]
+        spacing = np.array([_part_spacing(part) for part in parts])
+        owned, close = _join_parts(owned, np.cumsum([0] + [g.count for g in gens]), spacing,
+                                   1e-6 * smallest ** (1.0 / dim), comm)
+        for q, p in zip(*np.nonzero(close)):
+            warn(f"geometry.parts[{q}] and geometry.parts[{p}] overlap: {close[q, p]} particles of "
+                 f"parts[{p}] lie within half a spacing ({0.5 * min(spacing[q], spacing[p]):g}) of "
+                 f"parts[{q}]'s particles (not coincident, so both are kept and the density doubles there)")
     X, measure = owned["X"], owned["measure"]
     factor = {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[dim]
     owned["volume"] = measure * factor

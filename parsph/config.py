@@ -14,6 +14,9 @@ import difflib
 import operator
 import json
 import math
+import os
+import stat
+import sys
 import tomllib
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -236,8 +239,6 @@ def _coerce(path: str, key: Key, value: Any, dim: int | None):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise bad("a number")
         value = float(value)
-        if not math.isfinite(value):
-            raise InputError(f"{path} must be finite, got {value!r}")
     elif kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             raise bad("an integer")
@@ -461,26 +462,59 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         scene["probes"].append(probe)
 
 
+def _power(a, b):
+    """a ** b, refused before it is computed if its magnitude would exceed 2^1024."""
+    if abs(a) > 1 and b > 0 and b * math.log2(abs(a)) > 1024:
+        raise OverflowError("a result beyond 1.8e308 in magnitude")
+    return a ** b
+
+
 _OPERATORS = {
     ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
-    ast.Pow: operator.pow, ast.USub: operator.neg, ast.UAdd: operator.pos,
+    ast.Pow: _power, ast.USub: operator.neg, ast.UAdd: operator.pos,
 }
 
 
+def _finite(path: str, value: Any) -> None:
+    """Refuse a number that is not finite as a float: nan, inf or an integer beyond 1.8e308."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise InputError(f"{path} must be finite, got {value!r}")
+    if isinstance(value, int) and abs(value) > sys.float_info.max:
+        raise InputError(f"{path} must be finite, got a {value.bit_length()}-bit integer (beyond 1.8e308)")
+
+
+def _real(value):
+    """`value` if it is a real number within the float range, else ArithmeticError."""
+    if isinstance(value, complex):
+        raise ArithmeticError("no real value")
+    if abs(value) > sys.float_info.max or not math.isfinite(value):
+        raise OverflowError("a result beyond 1.8e308 in magnitude")
+    return value
+
+
+MAX_EXPRESSION = 300  # characters of one "= EXPR" value
+
+
 def _evaluate(path: str, text: str, parameters: dict) -> float:
-    """Value of an arithmetic expression over the scene's parameters (+ - * / ** and brackets)."""
+    """Value of an arithmetic expression over the scene's parameters (+ - * / ** and brackets).
+
+    Every intermediate result must be a real number within the float range; powers are
+    checked before they are computed and the length cap bounds the nesting, so no
+    expression runs long or exhausts the parser."""
+    if len(text) > MAX_EXPRESSION:
+        raise InputError(f"{path}: the expression is {len(text)} characters long (at most {MAX_EXPRESSION})")
 
     def ev(node):
         if isinstance(node, ast.Expression):
             return ev(node.body)
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
-            return node.value
+            return _real(node.value)
         if isinstance(node, ast.Name):
             if node.id not in parameters:
                 raise InputError(f"{path}: unknown parameter '{node.id}' in '{text}'{_suggest(node.id, parameters)}")
             return parameters[node.id]
         if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
-            return _OPERATORS[type(node.op)](ev(node.left), ev(node.right))
+            return _real(_OPERATORS[type(node.op)](ev(node.left), ev(node.right)))
         if isinstance(node, ast.UnaryOp) and type(node.op) in _OPERATORS:
             return _OPERATORS[type(node.op)](ev(node.operand))
         raise InputError(f"{path}: '{text}' is not an arithmetic expression of numbers and parameters")
@@ -489,19 +523,21 @@ def _evaluate(path: str, text: str, parameters: dict) -> float:
         value = ev(ast.parse(text, mode="eval"))
     except SyntaxError:
         raise InputError(f"{path}: '{text}' is not an arithmetic expression") from None
-    except (ZeroDivisionError, OverflowError) as exc:
+    except ArithmeticError as exc:
         raise InputError(f"{path}: '{text}' cannot be evaluated ({exc})") from None
     return value
 
 
 def substitute_parameters(raw: dict) -> dict:
-    """Replace every string value "= EXPR" by its value over the table [parameters]."""
+    """Replace every string value "= EXPR" by its value over the table [parameters]; refuse
+    any number, given or computed, that is not finite."""
     parameters = raw.get("parameters", {})
     if not isinstance(parameters, dict):
         raise InputError("parameters must be a table of named numbers")
     for name, value in parameters.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(f"parameters.{name} must be a number, got {value!r}")
+        _finite(f"parameters.{name}", value)
 
     def walk(node, path):
         if isinstance(node, str) and node.lstrip().startswith("="):
@@ -510,6 +546,7 @@ def substitute_parameters(raw: dict) -> dict:
             return {k: walk(v, f"{path}.{k}" if path else k) for k, v in node.items()}
         if isinstance(node, list):
             return [walk(v, f"{path}[{i}]") for i, v in enumerate(node)]
+        _finite(path, node)
         return node
 
     return walk(raw, "")
@@ -564,8 +601,10 @@ def parse_override(text: str) -> tuple[list[str | int], Any]:
         raise InputError(f"--set: bad key path '{path}'")
     try:
         value = tomllib.loads(f"v = {value_text}")["v"]
-    except tomllib.TOMLDecodeError:
+    except ValueError:  # not TOML (TOMLDecodeError) or an integer of too many digits
         value = value_text
+    except RecursionError:
+        raise InputError(f"--set {path.strip()}: the value is nested too deeply") from None
     return parts, value
 
 
@@ -591,19 +630,33 @@ def apply_override(raw: dict, parts: list[str | int], value: Any) -> None:
                 node = node.setdefault(part, {})
 
 
-def load(path: str, overrides: list[str] = ()) -> dict:
-    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene."""
+def _read(path: str) -> dict:
+    """The raw TOML table of the scene file `path`; a FIFO or device is refused unread."""
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO without a writer must not wait
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            os.close(fd)
+            if stat.S_ISDIR(mode):
+                raise InputError(f"scene path is a directory, not a file: {path}")
+            raise InputError(f"scene path is not a regular file (a pipe or a device): {path}")
+        with open(fd, "rb") as fh:
+            return tomllib.load(fh)
     except FileNotFoundError:
         raise InputError(f"scene file not found: {path}") from None
-    except IsADirectoryError:
-        raise InputError(f"scene path is a directory, not a file: {path}") from None
     except PermissionError:
         raise InputError(f"scene file is not readable: {path}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except OSError as exc:
+        raise InputError(f"scene file {path} cannot be read: {exc.strerror or exc}") from None
+    except ValueError as exc:  # TOMLDecodeError, UnicodeDecodeError, an integer of too many digits
         raise InputError(f"scene file {path} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise InputError(f"scene file {path} is not valid TOML: arrays or tables nested too deeply") from None
+
+
+def load(path: str, overrides: list[str] = ()) -> dict:
+    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene."""
+    raw = _read(path)
     for text in overrides:
         apply_override(raw, *parse_override(text))
     return validate(raw)

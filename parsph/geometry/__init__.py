@@ -3,18 +3,20 @@
 particle group selection."""
 
 from .groups import select
-from .lattice import Box, box
-from .shapes import Cylinder, Disk, Ring, cylinder, disk, ring, shadowed, union
+from .lattice import MAX_PARTICLES, Box, box
+from .shapes import Cylinder, Disk, Ring, close_pairs, cylinder, disk, ring, shadowed, union
 from .smoothing import support_for_neighbours, support_from_spacing
 from .voronoi import RandomPatch, random_box, random_patch
 
 __all__ = [
+    "MAX_PARTICLES",
     "Box",
     "Cylinder",
     "Disk",
     "RandomPatch",
     "Ring",
     "box",
+    "close_pairs",
     "cylinder",
     "disk",
     "random_box",

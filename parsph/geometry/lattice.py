@@ -5,6 +5,16 @@ import math
 
 import numpy as np
 
+MAX_PARTICLES = 2**31  # the most particles one part may have
+
+
+def _check_count(func, estimate, what):
+    """Refuse a part of `estimate` particles (a number, possibly inf) above MAX_PARTICLES."""
+    if not estimate <= MAX_PARTICLES:
+        about = f" (about {estimate:.3g})" if math.isfinite(estimate) else ""
+        raise ValueError(f"{func}: {what} give more than 2^31 particles{about}; "
+                         f"use a larger spacing or a smaller body")
+
 
 def _vector(value, name, func, dim=None):
     """Return ``value`` as a finite float64 vector of length 1-3 (or exactly ``dim``)."""
@@ -83,16 +93,22 @@ class Box:
         h0 = _positive(spacing, "spacing", "box")
         if placement not in ("cell", "node"):
             raise ValueError(f"box: placement must be 'cell' or 'node', got {placement!r}")
-        self.coords, self.weights = [], []
-        for k in range(lo.size):
-            length = hi[k] - lo[k]
+        lengths = [float(b) - float(a) for a, b in zip(lo, hi)]
+        what = f"lengths {', '.join(f'{x:g}' for x in lengths)} at spacing {h0:g}"
+        counts = []
+        for k, length in enumerate(lengths):
+            _check_count("box", length / h0, what)
             count = round(length / h0)
             if count < 1:
-                raise ValueError(f"box: the box length {float(length):g} on axis {k} is shorter than "
-                                 f"half the spacing {float(h0):g}: no particle fits")
+                raise ValueError(f"box: the box length {length:g} on axis {k} is shorter than "
+                                 f"half the spacing {h0:g}: no particle fits")
             if abs(length / count - h0) > 1e-6 * h0:
-                raise ValueError(f"box: the box length {float(length):g} on axis {k} is not a multiple of "
-                                 f"spacing={float(h0):g} (to 1e-6 relative)")
+                raise ValueError(f"box: the box length {length:g} on axis {k} is not a multiple of "
+                                 f"spacing={h0:g} (to 1e-6 relative)")
+            counts.append(count)
+        _check_count("box", math.prod(c + (placement == "node") for c in counts), what)
+        self.coords, self.weights = [], []
+        for k, (length, count) in enumerate(zip(lengths, counts)):
             h = length / count
             if placement == "cell":
                 self.coords.append(lo[k] + (np.arange(count) + 0.5) * h)

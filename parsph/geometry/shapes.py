@@ -6,7 +6,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .lattice import _nonnegative, _positive, _ravel_first_fastest, _vector
+from .lattice import _check_count, _nonnegative, _positive, _ravel_first_fastest, _vector
 
 
 class Cylinder:
@@ -28,6 +28,9 @@ class Cylinder:
         h = _positive(spacing, "spacing", "cylinder")
         if isinstance(axis, bool) or not isinstance(axis, (int, np.integer)) or axis not in (0, 1, 2):
             raise ValueError(f"cylinder: axis must be 0, 1 or 2, got {axis!r}")
+        what = f"radius {r:g} and length {length:g} at spacing {h:g}"
+        _check_count("cylinder", max(r, length) / h, what)
+        _check_count("cylinder", max(1.0, math.pi * (r / h) ** 2) * max(1.0, length / h), what)
         m = math.ceil(r / h)
         offsets = np.arange(-m, m + 1) * h
         u, v = _ravel_first_fastest([offsets, offsets])
@@ -54,12 +57,17 @@ class Concentric:
     """2D particles on concentric circles covering the annulus r_in <= r <= r_out, in
     blocks of rows: round((r_out - r_in)/spacing) layers (at least 1) at radii r_in +
     (k + 0.5)·Δr, each with round(2π r_k/spacing) (at least 3) particles evenly spaced in
-    angle and volume r_k Δr Δθ, so the volumes sum to π (r_out² - r_in²)."""
+    angle and volume r_k Δr Δθ, so the volumes sum to π (r_out² - r_in²). `func` names the
+    shape in error messages."""
 
     blockwise = True  # rows(start, stop) builds only those rows
 
-    def __init__(self, center, r_in, r_out, h):
+    def __init__(self, center, r_in, r_out, h, func):
         self.center = center
+        what = f"radii {r_in:g} to {r_out:g} at spacing {h:g}"
+        _check_count(func, r_out / h, what)
+        _check_count(func, max(3.0 * (r_out - r_in) / h, math.pi * ((r_out / h) ** 2 - (r_in / h) ** 2)),
+                     what)
         n_r = max(1, round((r_out - r_in) / h))
         dr = (r_out - r_in) / n_r
         self.radius = r_in + (np.arange(n_r) + 0.5) * dr
@@ -87,7 +95,7 @@ class Ring(Concentric):
         r_out = _positive(outer_radius, "outer_radius", "ring")
         if r_in >= r_out:
             raise ValueError(f"ring: inner_radius={r_in!r} must be < outer_radius={r_out!r}")
-        super().__init__(c, r_in, r_out, _positive(spacing, "spacing", "ring"))
+        super().__init__(c, r_in, r_out, _positive(spacing, "spacing", "ring"), "ring")
 
 
 class Disk(Concentric):
@@ -96,7 +104,7 @@ class Disk(Concentric):
     def __init__(self, center, radius, spacing):
         c = _vector(center, "center", "disk", dim=2)
         r = _positive(radius, "radius", "disk")
-        super().__init__(c, 0.0, r, _positive(spacing, "spacing", "disk"))
+        super().__init__(c, 0.0, r, _positive(spacing, "spacing", "disk"), "disk")
 
 
 def _all(generator):
@@ -118,14 +126,22 @@ def disk(center, radius, spacing):
     return _all(Disk(center, radius, spacing))
 
 
+def close_pairs(positions, others, reach):
+    """Index arrays (i, j) and distances of the pairs of a point i of `positions` and a point
+    j of `others` closer than `reach`."""
+    if reach > 0.0 and len(positions) and len(others):
+        near = cKDTree(positions).sparse_distance_matrix(cKDTree(others), reach, output_type="ndarray")
+        near = near[near["v"] < reach]
+        return near["i"], near["j"], near["v"]
+    return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
+
+
 def shadowed(positions, index, others, other_index, tol):
     """Mask of the points of `positions` (global indices `index`) closer than `tol` to a
     point of `others` with a smaller index: the particles a union of parts drops."""
     dropped = np.zeros(len(positions), dtype=bool)
-    if tol > 0.0 and len(positions) and len(others):
-        near = cKDTree(positions).sparse_distance_matrix(cKDTree(others), tol, output_type="ndarray")
-        near = near[(near["v"] < tol) & (other_index[near["j"]] < index[near["i"]])]
-        dropped[near["i"]] = True
+    i, j, _ = close_pairs(positions, others, tol)
+    dropped[i[other_index[j] < index[i]]] = True
     return dropped
 
 

@@ -8,7 +8,7 @@ import operator
 import numpy as np
 from scipy.spatial import Voronoi
 
-from .lattice import _bounds
+from .lattice import MAX_PARTICLES, _bounds
 
 
 def _cells(points, lo, hi):
@@ -109,6 +109,8 @@ class RandomPatch:
             self.count = operator.index(count)
         except TypeError:
             raise ValueError(f"random_box: count must be an integer, got {count!r}") from None
+        if self.count > MAX_PARTICLES:
+            raise ValueError(f"random_patch: count = {self.count} is more than 2^31 particles")
         self.args = (lower, upper, count, seed, lloyd_iterations)
         self._whole = None
 
