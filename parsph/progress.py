@@ -7,8 +7,10 @@ import time
 
 
 class Progress:
-    def __init__(self, end_time: float, particles: int, interval: float, enabled: bool):
+    def __init__(self, end_time: float, max_steps: int, particles: int, interval: float, enabled: bool):
+        """Progress towards `end_time`, or `max_steps` (0: no limit) if that comes first."""
         self.end = end_time
+        self.max_steps = max_steps
         self.particles = particles
         self.interval = interval
         self.enabled = enabled
@@ -28,10 +30,12 @@ class Progress:
         self.last = now
         elapsed = now - self.start
         done = (t - self.start_t) / max(self.end - self.start_t, 1e-300)
+        if self.max_steps:
+            done = max(done, (step - self.start_step) / max(self.max_steps - self.start_step, 1))
         eta = elapsed * (1 - done) / done if done > 0 else float("nan")
         rate = self.particles * (step - self.start_step) / elapsed if elapsed > 0 else 0.0
         line = (f"step {step:8d}  t = {t:.4e} s  dt = {dt:.3e} s  {100 * done:5.1f} %  "
-                f"{rate:.3e} particle-steps/s  left ~ {_clock(eta)}")
+                f"{rate:.3e} particle-steps/s  left ~ {format_duration(eta)}")
         if self.live:
             print("\r" + line, end="", flush=True)
         else:
@@ -42,9 +46,13 @@ class Progress:
             print(flush=True)
 
 
-def _clock(seconds: float) -> str:
+def format_duration(seconds: float) -> str:
+    """h:mm:ss up to 100 hours, then days, then years (3 digits)."""
     if seconds != seconds:
         return "?"
+    if seconds >= 100 * 3600:
+        days = seconds / 86400
+        return f"{days:.3g} days" if days < 1000 else f"{days / 365.25:.3g} years"
     m, s = divmod(int(seconds), 60)
     h, m = divmod(m, 60)
     return f"{h:d}:{m:02d}:{s:02d}"

@@ -4,8 +4,10 @@ wall-clock limit."""
 
 from __future__ import annotations
 
+import glob
 import json
 import os
+import shlex
 import signal
 import time
 
@@ -14,45 +16,17 @@ from mpi4py import MPI
 
 from parsph import config
 from parsph.diagnostics import check_particle_ids
-from parsph.errors import InputError
-from parsph.io import checkpoint
-from parsph.io.history import HistoryWriter
-from parsph.io.snapshots import SnapshotWriter
+from parsph.errors import InputError, ParsphError
+from parsph.io import checkpoint, output_dir
+from parsph.io.history import HistoryWriter, read_reached
+from parsph.io.snapshots import SnapshotWriter, check_snapshots_readable
 from parsph.parallel.runtime import COMM, collective, say
-from parsph.progress import Progress
+from parsph.progress import Progress, format_duration
 
-RUN_FILES = ("history.h5", "snapshots.h5", "snapshots.xdmf", "scene.json")
 PROBE_UNITS = {"displacement": "m", "velocity": "m/s", "position": "m", "reaction": "N", "force": "N",
                "J": "1", "von_mises": "Pa", "disorder": "1",
                "spacing_ratio": "1"}
-
-
-def check_output(out_dir: str, overwrite: bool) -> list:
-    """Rank 0 checks the output directory, changing nothing; returns the previous run's
-    files there (to be replaced: only with --overwrite)."""
-    present = []
-    with collective():
-        if COMM.rank == 0:
-            if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-                raise InputError(f"output path {out_dir} exists and is not a directory")
-            present = [f for f in RUN_FILES if os.path.exists(os.path.join(out_dir, f))]
-            if present and not overwrite:
-                raise InputError(
-                    f"output directory {out_dir} already holds a run ({', '.join(present)}); "
-                    "choose another --out, pass --overwrite to replace it, or --restart latest to continue it")
-    return present
-
-
-def claim_output(out_dir: str, present: list) -> None:
-    """Create the output directory and remove the previous run's files (--overwrite), once
-    the new run has been set up without error."""
-    with collective():
-        if COMM.rank == 0:
-            os.makedirs(out_dir, exist_ok=True)
-            for f in present:
-                os.remove(os.path.join(out_dir, f))
-            if present:
-                say(f"replacing the previous run in {out_dir} (--overwrite)")
+REASONABLE_SECONDS = 30 * 86400.0  # a run expected to take longer than this gets a warning
 
 
 class Schedule:
@@ -111,26 +85,55 @@ def report_stages(seconds: dict, steps: int, particles: int) -> None:
 
 
 def _setup(scene_path, out_dir, overrides, overwrite, restart):
-    """The scene, output directory, this rank's particles (with ghosts) and the checkpoint
-    data of a run. Every rank builds (or reads) a block of the particle set; the blocks are
-    partitioned among the ranks by position."""
+    """The scene, output directory (locked for this run), this rank's particles (with
+    ghosts) and the checkpoint data of a run. Every rank builds (or reads) a block of the
+    particle set; the blocks are partitioned among the ranks by position."""
     with collective():
         scene = config.load(scene_path, overrides)
     out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
     from parsph.build import build_local
     from parsph.parallel.decomposition import add_ghosts, partition
 
+    output_dir.lock(out_dir)
     if restart is None:
-        previous = check_output(out_dir, overwrite)
+        previous = output_dir.check_output(out_dir, overwrite)
         return scene, out_dir, previous, build_local(scene, COMM), None
     data = checkpoint.load(restart, out_dir, COMM)
     with collective():
         checkpoint.check_compatible(data["scene"], scene, data["path"])
+        if COMM.rank == 0:
+            check_resumable(scene, out_dir)
     fields = data.pop("fields")
     position = "Xr" if "Xr" in fields else "X"
     local = add_ghosts(partition(fields, position, COMM), position, COMM)
     say(f"parsph: restarting from {data['path']} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
     return scene, out_dir, [], local, data
+
+
+def check_resumable(scene: dict, out_dir: str) -> None:
+    """Refuse, before anything is changed, a restart whose history or snapshots in `out_dir`
+    are damaged, or that would stop before the end of what `out_dir` already holds (it
+    would cut the history and snapshots written after its end)."""
+    reached = read_reached(os.path.join(out_dir, "history.h5"))
+    check_snapshots_readable(os.path.join(out_dir, "snapshots.h5"))
+    if reached is None:
+        return
+    t_last, step_last = reached
+    end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
+    if end < t_last * (1 - 1e-12) or (max_steps and max_steps < step_last):
+        raise InputError(
+            f"{out_dir} already holds the run to step {step_last}, t = {t_last:.6g} s; a restart that "
+            f"ends earlier (time.end = {end:.6g} s" + (f", time.max_steps = {max_steps}" if max_steps else "")
+            + ") would discard what was written after its end: give a later end, or restart into "
+            "another --out with --restart CHECKPOINT_FILE")
+
+
+def continue_command(scene_path: str, out_dir: str, overrides: list) -> str:
+    """The command that continues a stopped run, with the run's --set options."""
+    words = ["parsph", "run", scene_path, "--out", out_dir]
+    for text in overrides:
+        words += ["--set", text]
+    return shlex.join(words + ["--restart", "latest"])
 
 
 def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool,
@@ -148,68 +151,89 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     del local
     setup_seconds = time.perf_counter() - start
     if data is None:
-        claim_output(out_dir, previous)
+        output_dir.claim_output(out_dir, previous)
     say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 
     out = scene["output"]
     resume = None if data is None else sim.step_count
     nexts = {} if data is None else data["schedules"]
+    units = {p["name"]: PROBE_UNITS[p["quantity"]] for p in scene["probes"]}
     history = None
-    if COMM.rank == 0:
-        with open(os.path.join(out_dir, "scene.json"), "w") as fh:
-            json.dump(scene, fh, indent=2, sort_keys=True)
-        units = {p["name"]: PROBE_UNITS[p["quantity"]] for p in scene["probes"]}
-        history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units, resume)
+    output_dir.ensure_space(out_dir, 3 * len(scene_json), "the run's first output")
+    with collective():
+        if COMM.rank == 0:
+            with open(os.path.join(out_dir, "scene.json"), "w") as fh:
+                json.dump(scene, fh, indent=2, sort_keys=True)
+            history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units, resume)
     snapshots = SnapshotWriter(out_dir, scene_json, COMM, resume)
     history_due = Schedule(out["history_interval"], out["history_every"], nexts.get("history"))
     snapshot_due = Schedule(out["snapshot_interval"], 0, nexts.get("snapshot"))
     checkpoint_due = Schedule(out["checkpoint_interval"], out["checkpoint_every"], nexts.get("checkpoint"))
     end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
-    progress = Progress(end, count, out["progress_seconds"], enabled=COMM.rank == 0 and not quiet)
+    progress = Progress(end, max_steps, count, out["progress_seconds"], enabled=COMM.rank == 0 and not quiet)
     stop = StopRequest(scene["time"]["wall_limit"])
 
-    def record():
+    def record() -> int:
         start = time.perf_counter()
         if debug:
             check_particle_ids(sim)
         values = sim.diagnostics()
-        if history is not None:
-            history.append(values)
+        output_dir.ensure_space(out_dir, history.row_bytes(len(values)) if history is not None else 0,
+                                f"the history row at step {sim.step_count}")
+        with collective():
+            if history is not None:
+                history.append(values)
         sim.stage_seconds["diagnostics+history"] += time.perf_counter() - start
-        return values
+        return sim.step_count
+
+    def snapshot() -> None:
+        output_dir.ensure_space(out_dir, snapshots.estimate_bytes(sim, out["snapshot_fields"]),
+                                f"the snapshot at step {sim.step_count}")
+        snapshots.write(sim, out["snapshot_fields"])
 
     def save_checkpoint():
         schedules = {"history": history_due.next, "snapshot": snapshot_due.next,
                      "checkpoint": checkpoint_due.next}
         return checkpoint.write_checkpoint(out_dir, sim, schedules, scene, out["checkpoint_keep"])
 
-    last = record()
-    if data is None and out["snapshot_interval"] > 0:
-        snapshots.write(sim, out["snapshot_fields"])
+    last = -1 if data is None else sim.step_count
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count
     stopped = 0
     try:
-        while sim.t < end * (1 - 1e-12) and not (max_steps and sim.step_count >= max_steps):
+        if data is None:
+            last = record()
+            if out["snapshot_interval"] > 0:
+                snapshot()
+        while sim.t < end and not (max_steps and sim.step_count >= max_steps):
             dt = sim.step()
             progress.update(sim.step_count, sim.t, dt)
+            if sim.step_count - steps_at_start == 10:
+                warn_if_endless(sim, end, max_steps, time.perf_counter() - loop_start, 10)
             if history_due.due(sim.t, sim.step_count):
                 last = record()
             output_start = time.perf_counter()
             if snapshot_due.due(sim.t, sim.step_count):
-                snapshots.write(sim, out["snapshot_fields"])
+                snapshot()
             stopped = stop.check() if sim.step_count % 10 == 0 else 0
             if checkpoint_due.due(sim.t, sim.step_count) or stopped:
                 path = save_checkpoint()
             sim.stage_seconds["snapshots+checkpoints"] += time.perf_counter() - output_start
             if stopped:
                 break
-        # the final state is always in the history and in the snapshots
-        if last["step"] != sim.step_count:
-            last = record()
-        if not snapshots.times or snapshots.times[-1] != sim.t:
-            snapshots.write(sim, out["snapshot_fields"])
+        # the end state is always in the history and in the snapshots (a stopped run's is
+        # written when it is continued to its end)
+        if not stopped:
+            if last != sim.step_count:
+                last = record()
+            if not snapshots.times or snapshots.times[-1] != sim.t:
+                snapshot()
+    except output_dir.OutputFull as exc:
+        error = ParsphError(f"{exc}; stopped at step {sim.step_count}, t = {sim.t:.6g} s. "
+                            f"{_checkpoint_after_full(save_checkpoint, out_dir, scene_path, overrides)}")
+        error.agreed = True  # every rank met the same (collective) condition and wrote the same
+        raise error from None
     finally:
         stop.restore()
         progress.close()
@@ -225,6 +249,33 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     if stopped:
         why = "the wall-clock limit" if stopped < 0 else signal.Signals(stopped).name
         say(f"parsph: stopped by {why} at step {sim.step_count}; checkpoint {path}; "
-            f"continue with: parsph run {scene_path} --out {out_dir} --restart latest")
+            f"continue with: {continue_command(scene_path, out_dir, overrides)}")
         return 0 if stopped < 0 else 128 + stopped
     return 0
+
+
+def _checkpoint_after_full(save_checkpoint, out_dir: str, scene_path: str, overrides: list) -> str:
+    """Collective, after the disk filled: write a checkpoint if it fits; says what was done."""
+    try:
+        path = save_checkpoint()
+    except output_dir.OutputFull:
+        latest = sorted(glob.glob(os.path.join(out_dir, "checkpoints", "step_*.h5")))
+        where = f"the newest checkpoint is {latest[-1]}" if latest else "there is no checkpoint to continue from"
+        return f"The output written so far is intact; no room for a checkpoint either: {where}."
+    return (f"The output written so far is intact; checkpoint {path} written. Free space, then continue "
+            f"with: {continue_command(scene_path, out_dir, overrides)}")
+
+
+def warn_if_endless(sim, end: float, max_steps: int, seconds: float, steps: int) -> None:
+    """Warn (rank 0) when the steps left at the present step size would take longer than
+    REASONABLE_SECONDS of wall-clock time at the speed of the first `steps` steps."""
+    left = (end - sim.t) / sim.dt
+    if max_steps:
+        left = min(left, max_steps - sim.step_count)
+    expected = seconds / steps * left
+    if expected > REASONABLE_SECONDS:
+        from parsph.parallel.runtime import warn
+
+        warn(f"this run would take about {format_duration(expected)} ({left:.3g} steps of dt = "
+             f"{sim.dt:.3g} s to time.end = {end:.6g} s); check time.end, time.dt and the material "
+             "constants (the step size follows the wave speed sqrt(E / density) and the spacing)")

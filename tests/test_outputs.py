@@ -63,3 +63,19 @@ def test_plot_history_and_snapshots(bar_run):
         assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     proc = parsph(["plot", bar_run / "history.h5", "no_such_series"])
     assert proc.returncode == 2 and "no_such_series" in proc.stderr
+
+
+def test_every_history_series_has_units_and_plots_put_one_unit_per_panel(bar_run):
+    from parsph.io.history import read_units
+    from parsph.io.plots import by_unit
+
+    units = read_units(bar_run / "history.h5")
+    assert all(units.values()), {k: u for k, u in units.items() if not u}
+    assert units["momentum_x"] == "kg m/s" and units["kinetic_energy"] == "J" and units["dt"] == "s"
+    names = ["tip_displacement", "kinetic_energy", "strain_energy", "reaction_A"]
+    assert by_unit(names, units) == {"m": ["tip_displacement"], "J": ["kinetic_energy", "strain_energy"],
+                                     "N": ["reaction_A"]}
+    out = bar_run / "mixed.png"
+    proc = parsph(["plot", bar_run / "history.h5", *names, "-o", out])
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -129,8 +129,8 @@ def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
 
 @pytest.mark.parametrize("ranks", [1, pytest.param(3, marks=pytest.mark.mpi)])
 def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path, ranks):
-    """Each rank reads and checksums its own block of rows: a flipped byte in the last
-    particle's velocity (the last rank's block) is found and every rank refuses the file."""
+    """The ranks hash the file's chunks among them: a changed last velocity (the end of the
+    file) and a truncated file are found, and every rank refuses the file."""
     out = tmp_path / "run"
     run(out, ranks, "--set", "time.max_steps=30", "--set", "output.checkpoint_every=10",
         "--set", "output.checkpoint_keep=3")
@@ -146,7 +146,7 @@ def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp
     newest.write_bytes(bytes(data))
     middle = folder / names[-2]
     middle.write_bytes(middle.read_bytes()[:2000])
-    for path, why in ((newest, "corrupted"), (middle, "cannot be opened")):
+    for path, why in ((newest, "is damaged"), (middle, "is damaged or truncated")):
         proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", path], ranks=ranks)
         assert proc.returncode == 2 and why in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
@@ -178,7 +178,7 @@ def test_killed_run_leaves_readable_files_and_a_restartable_checkpoint(tmp_path,
     with h5py.File(out / "snapshots.h5", "r") as f:
         assert any(k.startswith("step_") for k in f)
     proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.end=1000", "--set", "time.max_steps=20"], ranks=2, env=env)
+                   *PATCH, "--set", "time.end=1000", "--set", "time.wall_limit=1"], ranks=2, env=env)
     assert proc.returncode == 0, proc.stderr
 
 

@@ -4,13 +4,18 @@ A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the r
 configuration (positions, measures, volumes, masses, kernel supports, group membership),
 the state (displacement, velocity) and, in the updated formulation, the current reference
 (X^r, F^r, V^r), plus the clock (time, step, dt, reference updates), the accumulated
-energies, the output schedules, and the resolved scene with its hash. It is written by all
-ranks together under a temporary name, closed, and renamed, so a checkpoint either exists
-whole or not at all; the last K are kept. Every dataset carries an order-independent
-checksum; a file that does not open, lacks a dataset or fails a checksum is refused. On
-restart every rank reads (and checksums) only a contiguous block of the rows.
-Restarting needs the same physics: only end time, step limit, wall-clock limit and output
-settings may differ from the checkpoint's scene.
+energies, the output schedules and the resolved scene. It is written by all ranks together
+under a temporary name, made durable (fsync) and renamed, so a checkpoint either exists
+whole or not at all; the last K are kept.
+
+Every byte after the file's 512-byte HDF5 user block is covered by a SHA-256 digest kept in
+that user block (`file_digest`): the file is cut into fixed 4 MiB chunks, the ranks hash the
+chunks in parallel, and the digest is the hash of the chunks' hashes, so it does not depend
+on the rank count. A restart checks the digest before HDF5 reads a byte, so a damaged
+checkpoint, in its data or in its HDF5 structure, is refused with a message (and skipped by
+`--restart latest`) and never reaches the reader. Restarting needs the same physics: only
+end time, step limit, wall-clock limit and output settings may differ from the checkpoint's
+scene.
 """
 
 from __future__ import annotations
@@ -25,130 +30,197 @@ import h5py
 import numpy as np
 
 from parsph import config
-from parsph.errors import InputError
+from parsph.errors import InputError, ParsphError
 from parsph.io.h5 import ParticleFile
+from parsph.io.output_dir import ensure_space
 from parsph.parallel.decomposition import block_cuts
 from parsph.parallel.runtime import collective, say
 
-FORMAT = 2
+FORMAT = 3
+USERBLOCK = 512  # bytes before the HDF5 data: magic, digest, zero padding
+MAGIC = b"parsph checkpoint sha256 "
+CHUNK = 4 << 20  # bytes per hashed chunk
 # keys that may change on restart: they do not change the physics of the steps taken
 RESTART_FREE = ("time.end", "time.max_steps", "time.wall_limit", "output.", "scene.description",
                 "scene.expected", "scene.source")
+ATTRIBUTES = ("format", "scene", "groups", "clock", "totals", "schedules", "particles", "fields")
 
 
-def scene_hash(scene: dict) -> str:
-    return hashlib.sha256(config.to_json(scene).encode()).hexdigest()
+def file_digest(path: str, comm) -> str:
+    """Collective: SHA-256 (hex) of the file's size and of the SHA-256 of each 4 MiB chunk
+    after the user block, the chunks shared out among the ranks. Raises the same
+    ValueError on every rank if any rank cannot read its chunks."""
+    mine, failure = {}, None
+    try:
+        size = os.path.getsize(path)
+        count = -(-(size - USERBLOCK) // CHUNK) if size > USERBLOCK else 0
+        with open(path, "rb") as fh:
+            for k in range(comm.rank, count, comm.size):
+                fh.seek(USERBLOCK + k * CHUNK)
+                mine[k] = hashlib.sha256(fh.read(CHUNK)).digest()
+    except OSError as exc:
+        failure = f"cannot be read ({exc.strerror or exc})"
+    parts = comm.allgather((failure, mine))
+    failures = [f for f, _ in parts if f]
+    if failures:
+        raise ValueError(failures[0])
+    chunks = {}
+    for _, part in parts:
+        chunks.update(part)
+    whole = hashlib.sha256(size.to_bytes(8, "little"))
+    for k in range(count):
+        whole.update(chunks[k])
+    return whole.hexdigest()
 
 
-def checksum(gid: np.ndarray, rows: np.ndarray) -> int:
-    """Order-independent checksum: sum over elements of bits x (position + 1), mod 2^64."""
-    bits = np.ascontiguousarray(rows).view(np.uint8).reshape(len(rows), -1)
-    words = np.zeros((len(rows), -(-bits.shape[1] // 8) * 8), np.uint8)
-    words[:, : bits.shape[1]] = bits
-    words = words.view(np.uint64)
-    weight = (np.asarray(gid, np.uint64)[:, None] * np.uint64(words.shape[1])
-              + np.arange(1, words.shape[1] + 1, dtype=np.uint64))
-    with np.errstate(over="ignore"):
-        return int(np.sum(words * weight, dtype=np.uint64))
+def _header(digest: str) -> bytes:
+    return (MAGIC + digest.encode()).ljust(USERBLOCK, b"\0")
 
 
-def _sum_mod64(comm, value: int) -> int:
-    return sum(comm.allgather(value)) % (1 << 64)
+def _collective_check(comm, check) -> None:
+    """Run `check()` on every rank; raise the first rank's ValueError (or OSError, as a
+    ValueError) on all ranks."""
+    failure = None
+    try:
+        check()
+    except (ValueError, OSError) as exc:
+        failure = str(exc) if isinstance(exc, ValueError) else f"cannot be read ({exc.strerror or exc})"
+    failures = [m for m in comm.allgather(failure) if m]
+    if failures:
+        raise ValueError(failures[0])
+
+
+def verify(path: str, comm) -> None:
+    """Collective: raise ValueError (same message on every rank) unless `path` is a whole
+    checkpoint: its user block holds the magic and the digest of the rest of the file."""
+    stored = []
+
+    def header():
+        with open(path, "rb") as fh:
+            block = fh.read(USERBLOCK)
+        if len(block) < USERBLOCK or not block.startswith(MAGIC):
+            raise ValueError("is not a parsph checkpoint (no checkpoint header; written by an older "
+                             "parsph, or damaged)")
+        if block != _header(block[len(MAGIC): len(MAGIC) + 64].decode("latin-1")):
+            raise ValueError("is damaged (its header was changed)")
+        stored.append(block[len(MAGIC): len(MAGIC) + 64].decode("latin-1"))
+
+    _collective_check(comm, header)
+    if file_digest(path, comm) != stored[0]:
+        raise ValueError("is damaged or truncated (its SHA-256 digest does not match the content)")
+
+
+def _estimate_bytes(fields: dict, scene_json: str, comm) -> int:
+    local = sum(np.asarray(rows).nbytes for rows in fields.values())
+    return comm.allreduce(local) + len(scene_json) + 64 * 1024 + USERBLOCK
 
 
 def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int) -> str:
     """Collective: write the run's state; returns the checkpoint's path."""
     comm = sim.comm
     folder = os.path.join(out_dir, "checkpoints")
-    with collective():
-        if comm.rank == 0:
-            os.makedirs(folder, exist_ok=True)
     name = f"step_{sim.step_count:08d}.h5"
     final = os.path.join(folder, name)
     tmp = os.path.join(folder, f".{name}.tmp")
-    n = sim.n_owned
-    gid = sim.gid[:n]
+    gid = sim.gid[:sim.n_owned]
     state = sim.checkpoint_state()
-    sums = {}
     fields = state["fields"]
-    with collective():
-        with ParticleFile(tmp, "w", comm) as out:
-            for field, rows in fields.items():
-                out.write_rows(field, gid, rows, sim.decomp.total)
-                sums[field] = _sum_mod64(comm, checksum(gid, rows))
-            if out.writer:
-                attrs = out.file.attrs
-                attrs["format"] = FORMAT
-                attrs["scene"] = config.to_json(scene)
-                attrs["scene_hash"] = scene_hash(scene)
-                attrs["groups"] = json.dumps(state["group_names"])
-                attrs["clock"] = json.dumps(state["clock"])
-                attrs["fields"] = json.dumps(list(fields))
-                attrs["totals"] = json.dumps(state["totals"])
-                attrs["schedules"] = json.dumps(schedules)
-                attrs["checksums"] = json.dumps({k: str(v) for k, v in sums.items()})
-                attrs["particles"] = sim.decomp.total
+    scene_json = config.to_json(scene)
     with collective():
         if comm.rank == 0:
-            os.replace(tmp, final)
+            os.makedirs(folder, exist_ok=True)
+    ensure_space(out_dir, _estimate_bytes(fields, scene_json, comm), f"the checkpoint at step {sim.step_count}")
+    try:
+        with collective():
+            with ParticleFile(tmp, "w", comm, userblock_size=USERBLOCK) as out:
+                for field, rows in fields.items():
+                    out.write_rows(field, gid, rows, sim.decomp.total)
+                if out.writer:
+                    attrs = out.file.attrs
+                    attrs["format"] = FORMAT
+                    attrs["scene"] = scene_json
+                    attrs["groups"] = json.dumps(state["group_names"])
+                    attrs["clock"] = json.dumps(state["clock"])
+                    attrs["fields"] = json.dumps(list(fields))
+                    attrs["totals"] = json.dumps(state["totals"])
+                    attrs["schedules"] = json.dumps(schedules)
+                    attrs["particles"] = sim.decomp.total
+        try:
+            digest = file_digest(tmp, comm)
+        except ValueError as exc:
+            raise ParsphError(f"the written file {exc}") from None
+        with collective():
+            if comm.rank == 0:
+                with open(tmp, "r+b") as fh:
+                    fh.write(_header(digest))
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                os.replace(tmp, final)
+                _fsync_directory(folder)
+    except ParsphError as exc:
+        with collective():
+            if comm.rank == 0 and os.path.exists(tmp):
+                os.remove(tmp)
+        raise ParsphError(f"writing checkpoint {final} failed: {exc}") from None
+    with collective():
+        if comm.rank == 0:
             older = sorted(glob.glob(os.path.join(folder, "step_*.h5")))[:-keep]
             for path in older:
                 os.remove(path)
     return final
 
 
+def _fsync_directory(folder: str) -> None:
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def _read_block(path: str, comm) -> dict:
-    """This rank's contiguous block of a checkpoint's rows with their partial checksums, and
-    the attributes; raises ValueError saying what is wrong."""
+    """This rank's contiguous block of a verified checkpoint's rows and the attributes;
+    raises ValueError saying what is wrong."""
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
         raise ValueError(f"cannot be opened as HDF5 ({exc})") from None
     with f:
         try:
-            attrs = {k: f.attrs[k] for k in ("format", "scene", "scene_hash", "groups", "clock",
-                                              "totals", "schedules", "checksums", "particles", "fields")}
+            attrs = {k: f.attrs[k] for k in ATTRIBUTES}
         except KeyError as exc:
             raise ValueError(f"is incomplete (attribute {exc} missing)") from None
         if attrs["format"] != FORMAT:
             raise ValueError(f"has format {attrs['format']}, this parsph reads format {FORMAT}")
-        if scene_hash(json.loads(attrs["scene"])) != attrs["scene_hash"]:
-            raise ValueError("is corrupted (scene hash does not match)")
         total = int(attrs["particles"])
         start, stop = block_cuts(total, comm.size)[comm.rank: comm.rank + 2]
-        gid = np.arange(start, stop, dtype=np.int64)
-        names = json.loads(attrs["fields"])
-        expected = json.loads(attrs["checksums"])
-        fields, sums = {"gid": gid}, {}
-        for field in names:
-            if field not in f or len(f[field]) != total or field not in expected:
+        fields = {"gid": np.arange(start, stop, dtype=np.int64)}
+        for field in json.loads(attrs["fields"]):
+            if field not in f or len(f[field]) != total:
                 raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
-            try:
-                fields[field] = f[field][start:stop]
-            except OSError as exc:
-                raise ValueError(f"dataset '{field}' cannot be read ({exc})") from None
-            sums[field] = checksum(gid, fields[field])
-    return {"attrs": attrs, "fields": fields, "sums": sums}
+            fields[field] = f[field][start:stop]
+    return {"attrs": attrs, "fields": fields}
 
 
 def read(path: str, comm) -> dict:
-    """Collective: check checkpoint `path`, each rank reading a contiguous block of its rows;
-    returns the block ("fields", with "gid") and the run's scene, groups, clock, totals and
-    schedules. Raises the same ValueError on every rank if the file is not whole."""
-    block, failure = None, None
-    try:
-        block = _read_block(path, comm)
-    except ValueError as exc:
-        failure = str(exc)
-    failures = [m for m in comm.allgather(failure) if m]
-    if failures:
-        raise ValueError(failures[0])
-    attrs = block["attrs"]
-    expected = json.loads(attrs["checksums"])
-    for field, part in block["sums"].items():
-        if str(_sum_mod64(comm, part)) != expected[field]:
-            raise ValueError(f"is corrupted (checksum of '{field}' does not match)")
-    data = {"path": path, "fields": block["fields"], "scene": json.loads(attrs["scene"]),
+    """Collective: verify checkpoint `path` (digest), then each rank reads a contiguous
+    block of its rows; returns the block ("fields", with "gid") and the run's scene,
+    groups, clock, totals and schedules. Raises the same ValueError on every rank if the
+    file is not whole."""
+    verify(path, comm)
+    block = []
+
+    def read_block():
+        try:
+            block.append(_read_block(path, comm))
+        except ValueError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a verified file should not fail; say how it did
+            raise ValueError(f"cannot be read ({type(exc).__name__}: {exc})") from None
+
+    _collective_check(comm, read_block)
+    attrs = block[0]["attrs"]
+    data = {"path": path, "fields": block[0]["fields"], "scene": json.loads(attrs["scene"]),
             "group_names": json.loads(attrs["groups"])}
     for key in ("clock", "totals", "schedules"):
         data[key] = json.loads(attrs[key])
@@ -156,9 +228,9 @@ def read(path: str, comm) -> dict:
 
 
 def load(spec: str, out_dir: str, comm) -> dict:
-    """Collective: the checkpoint to restart from, read in blocks (`read`): `latest` is the
-    newest valid one in OUT/checkpoints (invalid ones are skipped with a message), else
-    the named file, which is refused if invalid."""
+    """Collective: the checkpoint to restart from, verified and read in blocks (`read`):
+    `latest` is the newest valid one in OUT/checkpoints (invalid ones are skipped with a
+    message), else the named file, which is refused if invalid."""
     candidates = None
     with collective(comm):
         if comm.rank == 0:

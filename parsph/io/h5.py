@@ -32,14 +32,15 @@ def parallel_enabled(comm) -> bool:
 class ParticleFile:
     """An HDF5 file that every rank opens together (or only rank 0 without parallel HDF5)."""
 
-    def __init__(self, path: str, mode: str, comm):
+    def __init__(self, path: str, mode: str, comm, **options):
+        """`options` go to h5py.File (e.g. userblock_size)."""
         self.comm = comm
         self.collective = parallel_enabled(comm)
         self.file = None
         if self.collective:
-            self.file = h5py.File(path, mode, driver="mpio", comm=comm)
+            self.file = h5py.File(path, mode, driver="mpio", comm=comm, **options)
         elif comm.rank == 0:
-            self.file = h5py.File(path, mode)
+            self.file = h5py.File(path, mode, **options)
 
     @property
     def writer(self) -> bool:

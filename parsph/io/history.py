@@ -1,49 +1,78 @@
 """`history.h5`: one resizable 1-D dataset per diagnostic and probe, one row per output time.
 
 Written by rank 0 (history values are already global reductions). Each row is flushed, so
-a killed run leaves a readable file. The resolved scene is stored as the attribute `scene`.
+a killed run leaves a readable file. The resolved scene is stored as the attribute `scene`;
+every series carries its units as the attribute `units`.
 """
 
 from __future__ import annotations
 
 import os
+import re
 
 import h5py
 import numpy as np
 
+from parsph.errors import InputError, ParsphError
+
 UNITS = {
-    "time": "s", "step": "1", "dt": "s", "kinetic_energy": "J", "strain_energy": "J",
-    "hourglass_energy": "J", "external_work": "J", "total_energy": "J",
+    "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
+    "strain_energy": "J", "hourglass_energy": "J", "external_work": "J", "total_energy": "J",
+    "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
+PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"), (r".+_force_[xyz]", "N"))
+
+
+def units_of(name: str, probe_units: dict) -> str:
+    """Units of a history series: the diagnostics', a probe's, or an obstacle force's."""
+    if name in UNITS:
+        return UNITS[name]
+    if name in probe_units:
+        return probe_units[name]
+    return next((u for pattern, u in PATTERNS if re.fullmatch(pattern, name)), "")
 
 
 class HistoryWriter:
     def __init__(self, path: str, scene_json: str, probe_units: dict, resume_step: int | None = None):
-        """A new file, or (resume_step given) the existing one cut back to the rows before
+        """A new file, or (resume_step given) the existing one cut back to the rows up to
         that step, as a restarted run continues it."""
+        self.path = path
         self.probe_units = probe_units
         self.rows = 0
         if resume_step is not None and os.path.exists(path):
-            self.file = h5py.File(path, "a")
-            if "step" in self.file:
-                self.rows = int(np.searchsorted(self.file["step"][()], resume_step))
-                for name in self.file:
-                    self.file[name].resize((self.rows,))
-            self.file.attrs["scene"] = scene_json
+            try:
+                self.file = h5py.File(path, "a")
+                if "step" in self.file:
+                    self.rows = int(np.searchsorted(self.file["step"][()], resume_step, side="right"))
+                    for name in self.file:
+                        self.file[name].resize((self.rows,))
+                self.file.attrs["scene"] = scene_json
+            except Exception as exc:  # noqa: BLE001 - any damage: name the file
+                raise InputError(f"{path} cannot be continued ({type(exc).__name__}: {exc}); restart into "
+                                 "another --out with --restart CHECKPOINT_FILE") from None
             return
         self.file = h5py.File(path, "w")
         self.file.attrs["scene"] = scene_json
 
+    def row_bytes(self, series: int) -> int:
+        """Bytes the next row of `series` values can add to the file (a new chunk per
+        series every 256 rows)."""
+        return series * (64 + (2048 if self.rows % 256 == 0 else 0))
+
     def append(self, values: dict) -> None:
-        for name, value in values.items():
-            if name not in self.file:
-                ds = self.file.create_dataset(name, shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
-                ds.attrs["units"] = UNITS.get(name, self.probe_units.get(name, ""))
-            ds = self.file[name]
-            ds.resize((self.rows + 1,))
-            ds[self.rows] = value
+        """Add one row (flushed); a failure is a ParsphError naming the file."""
+        try:
+            for name, value in values.items():
+                if name not in self.file:
+                    ds = self.file.create_dataset(name, shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
+                    ds.attrs["units"] = units_of(name, self.probe_units)
+                ds = self.file[name]
+                ds.resize((self.rows + 1,))
+                ds[self.rows] = value
+            self.file.flush()
+        except Exception as exc:  # noqa: BLE001 - h5py raises several types
+            raise ParsphError(f"writing {self.path} failed ({type(exc).__name__}: {exc})") from None
         self.rows += 1
-        self.file.flush()
 
     def close(self) -> None:
         self.file.close()
@@ -53,3 +82,24 @@ def read_history(path: str) -> dict:
     """All series of a history file as numpy arrays."""
     with h5py.File(path, "r") as f:
         return {name: np.asarray(f[name]) for name in f}
+
+
+def read_units(path: str) -> dict:
+    """The units attribute of every series of a history file."""
+    with h5py.File(path, "r") as f:
+        return {name: str(f[name].attrs.get("units", "")) for name in f}
+
+
+def read_reached(path: str) -> tuple | None:
+    """(time, step) of the last row of a history file, None if it does not exist or has no
+    rows; InputError if it cannot be read."""
+    if not os.path.exists(path):
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            if "time" not in f or not len(f["time"]):
+                return None
+            return float(f["time"][-1]), int(f["step"][-1])
+    except Exception as exc:  # noqa: BLE001 - any damage: name the file
+        raise InputError(f"{path} is damaged and cannot be continued ({type(exc).__name__}: {exc}); "
+                         "restart into another --out with --restart CHECKPOINT_FILE") from None

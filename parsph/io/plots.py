@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 
 from parsph.errors import InputError
-from parsph.io.history import read_history
+from parsph.io.history import read_history, read_units
 
 
 def _pyplot():
@@ -22,24 +22,38 @@ def _pyplot():
     return plt
 
 
+def by_unit(names: list, units: dict) -> dict:
+    """The series `names` grouped by their units, in order of first appearance."""
+    panels = {}
+    for n in names:
+        panels.setdefault(units.get(n, ""), []).append(n)
+    return panels
+
+
 def plot_history(path: str, names: list, output: str | None) -> str:
-    """Series `names` (default: the energies) against time."""
+    """Series `names` (default: the energies) against time, one panel per unit, each axis
+    labelled with its unit."""
     plt = _pyplot()
     data = read_history(path)
+    units = read_units(path)
     names = names or [n for n in ("kinetic_energy", "strain_energy", "hourglass_energy", "total_energy")
                       if n in data]
     missing = [n for n in names if n not in data]
     if missing:
         raise InputError(f"no series {missing} in {path}; it has: {', '.join(sorted(data))}")
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for n in names:
-        ax.plot(data["time"], data[n], label=n)
-    ax.set_xlabel("time [s]")
-    ax.legend()
-    ax.grid(alpha=0.3)
+    panels = by_unit(names, units)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 1.0 + 3.0 * len(panels)), sharex=True, squeeze=False)
+    for ax, (unit, series) in zip(axes[:, 0], panels.items()):
+        for n in series:
+            ax.plot(data["time"], data[n], label=n)
+        ax.set_ylabel(f"[{unit or '-'}]")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
     output = output or os.path.splitext(path)[0] + "_" + "_".join(names)[:80] + ".png"
     fig.tight_layout()
     fig.savefig(output, dpi=120)
+    plt.close(fig)
     return output
 
 

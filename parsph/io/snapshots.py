@@ -3,8 +3,9 @@
 Each snapshot is a group `/step_NNNNNNNN` holding one dataset per field, written by all
 ranks together (io.h5). The file is opened for each snapshot and closed after it, so a
 killed run leaves every finished snapshot readable. `snapshots.xdmf` lists the snapshots as
-a time series of point clouds that ParaView opens; rank 0 rewrites it after each snapshot
-(to a temporary name, then renamed), so it is always valid.
+a time series of point clouds that ParaView opens; rank 0 writes it whole when a run starts
+or resumes (to a temporary name, then renamed) and then adds each snapshot's entry in one
+write over the closing tags, so the cost of an entry does not grow with the run.
 """
 
 from __future__ import annotations
@@ -14,33 +15,82 @@ import os
 import h5py
 import numpy as np
 
+from parsph.errors import InputError
 from parsph.io.h5 import ParticleFile
+from parsph.parallel.runtime import collective
+
+HEADER = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0">\n<Domain>\n'
+          '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">\n')
+FOOTER = "</Grid>\n</Domain>\n</Xdmf>\n"
+
+
+def field_bytes(name: str, dim: int) -> int:
+    """Bytes per particle of snapshot field `name` (sim.quantity's shapes)."""
+    if name == "rank":
+        return 4
+    if name in ("position", "reference_position"):
+        return 24
+    if name == "cauchy_stress":
+        return 8 * dim * dim
+    if name in ("displacement", "velocity", "reaction", "force"):
+        return 8 * dim
+    return 8
+
+
+def check_snapshots_readable(path: str) -> None:
+    """InputError naming `path` if it exists but its snapshots cannot be listed."""
+    if not os.path.exists(path):
+        return
+    try:
+        with h5py.File(path, "r") as f:
+            for name in f:
+                if name.startswith("step_"):
+                    f[name].attrs["step"], f[name].attrs["time"], f[name]["gid"].shape
+    except Exception as exc:  # noqa: BLE001 - any damage: name the file
+        raise InputError(f"{path} is damaged and cannot be continued ({type(exc).__name__}: {exc}); "
+                         "restart into another --out with --restart CHECKPOINT_FILE") from None
 
 
 class SnapshotWriter:
     def __init__(self, out_dir: str, scene_json: str, comm, resume_step: int | None = None):
-        """A new file, or (resume_step given) the existing one with the snapshots after
-        that step removed, as a restarted run continues it."""
+        """Collective: a new file, or (resume_step given) the existing one with the
+        snapshots after that step removed, as a restarted run continues it."""
         self.comm = comm
         self.path = os.path.join(out_dir, "snapshots.h5")
         self.xdmf = os.path.join(out_dir, "snapshots.xdmf")
         self.entries = []  # rank 0: (time, group, count, field shapes)
-        self.times = []  # every rank: when snapshots were taken
-        if comm.rank == 0:
-            if resume_step is None or not os.path.exists(self.path):
-                with h5py.File(self.path, "w") as f:
-                    f.attrs["scene"] = scene_json
-            else:
-                with h5py.File(self.path, "a") as f:
-                    for name in sorted(k for k in f if k.startswith("step_")):
-                        grp = f[name]
-                        if grp.attrs["step"] > resume_step:
-                            del f[name]
-                            continue
-                        shapes = {k: grp[k].shape[1:] for k in grp if k != "gid"}
-                        self.entries.append((float(grp.attrs["time"]), name, len(grp["gid"]), shapes))
+        self.end = 0  # rank 0: offset of the XDMF closing tags
+        with collective(comm):
+            if comm.rank == 0:
+                if resume_step is None or not os.path.exists(self.path):
+                    with h5py.File(self.path, "w") as f:
+                        f.attrs["scene"] = scene_json
+                else:
+                    self._resume(resume_step)
                 self._write_xdmf()
-        self.times = comm.bcast([e[0] for e in self.entries], root=0)
+        self.times = comm.bcast([e[0] for e in self.entries], root=0)  # every rank: snapshot times
+
+    def _resume(self, resume_step: int) -> None:
+        try:
+            with h5py.File(self.path, "a") as f:
+                for name in sorted(k for k in f if k.startswith("step_")):
+                    grp = f[name]
+                    if grp.attrs["step"] > resume_step:
+                        del f[name]
+                        continue
+                    shapes = {k: grp[k].shape[1:] for k in grp if k != "gid"}
+                    self.entries.append((float(grp.attrs["time"]), name, len(grp["gid"]), shapes))
+                if not self.entries and "connectivity" in f:  # written again with the first snapshot
+                    del f["connectivity"]
+        except Exception as exc:  # noqa: BLE001 - any damage: name the file
+            raise InputError(f"{self.path} cannot be continued ({type(exc).__name__}: {exc}); restart "
+                             "into another --out with --restart CHECKPOINT_FILE") from None
+
+    def estimate_bytes(self, sim, fields: list) -> int:
+        """Bytes one snapshot of `fields` adds to the file (data and HDF5 metadata)."""
+        per_particle = sum(field_bytes(name, sim.dim) for name in fields) + 8
+        first = 0 if self.times else 8 * sim.decomp.total  # the connectivity
+        return sim.decomp.total * per_particle + first + 1024 * (len(fields) + 2)
 
     def write(self, sim, fields: list) -> None:
         """Collective: one snapshot of the owned particles' `fields`."""
@@ -51,53 +101,63 @@ class SnapshotWriter:
         group = f"step_{sim.step_count:08d}"
         shapes = {}
         first = not self.times
-        with ParticleFile(self.path, "a", self.comm) as out:
-            if first:  # explicit Polyvertex connectivity 0..n-1, for readers that need it
-                out.write_rows("connectivity", gid, gid.astype(np.int64)[:, None], total)
-            if out.writer:
-                grp = out.file.create_group(group)
-                grp.attrs["time"] = sim.t
-                grp.attrs["step"] = sim.step_count
-            out.write_rows(f"{group}/gid", gid, gid, total)
-            for name in fields:
-                if name == "rank":
-                    data = np.full(n, self.comm.rank, np.int32)
-                elif name == "reference_position":
-                    data = sim.X[:n]
-                else:
-                    data = sim.quantity(name, sel)
-                if name in ("position", "reference_position") and data.shape[1] < 3:
-                    data = np.pad(data, ((0, 0), (0, 3 - data.shape[1])))
-                out.write_rows(f"{group}/{name}", gid, data, total)
-                shapes[name] = data.shape[1:]
+        with collective(self.comm):
+            with ParticleFile(self.path, "a", self.comm) as out:
+                if first:  # explicit Polyvertex connectivity 0..n-1, for readers that need it
+                    out.write_rows("connectivity", gid, gid.astype(np.int64)[:, None], total)
+                if out.writer:
+                    grp = out.file.create_group(group)
+                    grp.attrs["time"] = sim.t
+                    grp.attrs["step"] = sim.step_count
+                out.write_rows(f"{group}/gid", gid, gid, total)
+                for name in fields:
+                    if name == "rank":
+                        data = np.full(n, self.comm.rank, np.int32)
+                    elif name == "reference_position":
+                        data = sim.X[:n]
+                    else:
+                        data = sim.quantity(name, sel)
+                    if name in ("position", "reference_position") and data.shape[1] < 3:
+                        data = np.pad(data, ((0, 0), (0, 3 - data.shape[1])))
+                    out.write_rows(f"{group}/{name}", gid, data, total)
+                    shapes[name] = data.shape[1:]
         self.times.append(sim.t)
         if self.comm.rank == 0:
-            self.entries.append((sim.t, group, total, shapes))
-            self._write_xdmf()
+            entry = (sim.t, group, total, shapes)
+            self.entries.append(entry)
+            with open(self.xdmf, "r+") as fh:  # the entry and the closing tags in one write
+                fh.seek(self.end)
+                text = self._grid(*entry)
+                fh.write(text + FOOTER)
+            self.end += len(text)
+
+    def _grid(self, t: float, group: str, n: int, shapes: dict) -> str:
+        """The XDMF grid of one snapshot."""
+        base = os.path.basename(self.path)
+        lines = [f'<Grid Name="{group}" GridType="Uniform"><Time Value="{float(t)!r}"/>',
+                 f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
+                 f'<DataItem Dimensions="{n} 1" Format="HDF" NumberType="Int" Precision="8">'
+                 f'{base}:/connectivity</DataItem></Topology>',
+                 f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" Format="HDF" '
+                 f'NumberType="Float" Precision="8">{base}:/{group}/position</DataItem></Geometry>']
+        for name, shape in sorted(shapes.items()):
+            if name == "position":
+                continue
+            kind = "Scalar" if len(shape) == 0 else "Vector" if len(shape) == 1 else "Tensor"
+            dims = " ".join(str(s) for s in (n,) + tuple(shape))
+            number, size = ("Int", 4) if name == "rank" else ("Float", 8)
+            lines.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="Node">'
+                         f'<DataItem Dimensions="{dims}" Format="HDF" NumberType="{number}" '
+                         f'Precision="{size}">{base}:/{group}/{name}</DataItem></Attribute>')
+        lines.append("</Grid>")
+        return "\n".join(lines) + "\n"
 
     def _write_xdmf(self) -> None:
-        base = os.path.basename(self.path)
-        lines = ['<?xml version="1.0" ?>', '<Xdmf Version="3.0">', "<Domain>",
-                 '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">']
-        for t, group, n, shapes in self.entries:
-            lines.append(f'<Grid Name="{group}" GridType="Uniform"><Time Value="{float(t)!r}"/>')
-            lines.append(f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
-                         f'<DataItem Dimensions="{n} 1" Format="HDF" NumberType="Int" Precision="8">'
-                         f'{base}:/connectivity</DataItem></Topology>')
-            lines.append(f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" Format="HDF" '
-                         f'NumberType="Float" Precision="8">{base}:/{group}/position</DataItem></Geometry>')
-            for name, shape in shapes.items():
-                if name == "position":
-                    continue
-                kind = "Scalar" if len(shape) == 0 else "Vector" if len(shape) == 1 else "Tensor"
-                dims = " ".join(str(s) for s in (n,) + tuple(shape))
-                number, size = ("Int", 4) if name == "rank" else ("Float", 8)
-                lines.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="Node">'
-                             f'<DataItem Dimensions="{dims}" Format="HDF" NumberType="{number}" '
-                             f'Precision="{size}">{base}:/{group}/{name}</DataItem></Attribute>')
-            lines.append("</Grid>")
-        lines += ["</Grid>", "</Domain>", "</Xdmf>"]
+        """The whole index (to a temporary name, then renamed); remembers where the closing
+        tags start."""
+        body = HEADER + "".join(self._grid(*entry) for entry in self.entries)
         tmp = self.xdmf + ".tmp"
         with open(tmp, "w") as fh:
-            fh.write("\n".join(lines) + "\n")
+            fh.write(body + FOOTER)
         os.replace(tmp, self.xdmf)
+        self.end = len(body)

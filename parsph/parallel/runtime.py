@@ -14,7 +14,7 @@ import time
 
 from mpi4py import MPI
 
-from parsph.errors import InputError, ParsphError
+from parsph.errors import ParsphError
 
 COMM = MPI.COMM_WORLD
 
@@ -42,21 +42,22 @@ def warn(message: str) -> None:
 def collective(comm=COMM):
     """Run a block on every rank; if it raises on any rank, raise the same error on all ranks.
 
-    The lowest failing rank's message is sent to everyone; InputError stays InputError.
+    The lowest failing rank's message is sent to everyone, with its type (a ParsphError
+    subclass; any other exception becomes a ParsphError).
     """
     failure = None
     try:
         yield
     except ParsphError as exc:
-        failure = (type(exc).__name__, str(exc))
+        failure = (type(exc), str(exc))
     except Exception as exc:  # noqa: BLE001 - any failure must reach the other ranks
-        failure = ("ParsphError", f"{type(exc).__name__}: {exc}")
+        failure = (ParsphError, f"{type(exc).__name__}: {exc}")
     failures = comm.allgather(failure)
     for r, item in enumerate(failures):
         if item is not None:
             kind, message = item
-            prefix = "" if comm.size == 1 or kind == "InputError" else f"[rank {r}] "
-            error = (InputError if kind == "InputError" else ParsphError)(prefix + message)
+            prefix = f"[rank {r}] " if comm.size > 1 and kind is ParsphError else ""
+            error = kind(prefix + message)
             error.agreed = True
             raise error
 
