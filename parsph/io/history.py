@@ -39,6 +39,7 @@ class HistoryWriter:
         self.path = path
         self.probe_units = probe_units
         self.rows = 0
+        self.series = {}  # name -> open dataset
         if resume_step is not None and os.path.exists(path):
             try:
                 self.file = h5py.File(path, "a")
@@ -63,10 +64,11 @@ class HistoryWriter:
         """Add one row (flushed); a failure is a ParsphError naming the file."""
         try:
             for name, value in values.items():
-                if name not in self.file:
-                    ds = self.file.create_dataset(name, shape=(0,), maxshape=(None,), dtype="f8", chunks=(256,))
+                ds = self.series.get(name)
+                if ds is None:
+                    ds = self.series[name] = self.file.require_dataset(
+                        name, shape=(self.rows,), maxshape=(None,), dtype="f8", chunks=(256,))
                     ds.attrs["units"] = units_of(name, self.probe_units)
-                ds = self.file[name]
                 ds.resize((self.rows + 1,))
                 ds[self.rows] = value
             self.file.flush()
