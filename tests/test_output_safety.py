@@ -281,3 +281,13 @@ def test_two_ranks_refuse_a_directory_in_use(bar, tmp_path):
     finally:
         os.killpg(first.pid, signal.SIGKILL)
         first.communicate()
+
+
+@pytest.mark.timeout(30)
+def test_an_output_interval_far_below_the_step_fires_every_step_at_once():
+    from parsph.run import Schedule
+
+    every = Schedule(interval=1e-12, every=0)
+    for step, t in enumerate((1.5e-7, 3.0e-7, 4.5e-3), start=1):
+        assert every.due(t, step)
+        assert t < every.next <= t + 1e-12 * (1 + 1e-9) + 1e-12 * t
