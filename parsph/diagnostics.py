@@ -1,33 +1,31 @@
-"""Global diagnostics and probes, reduced over ranks in a fixed order.
+"""Global diagnostics and probes: exact sums over all particles (exact_sum), the same bit
+for bit on any number of ranks.
 
 Disorder: the mass-weighted RMS and the maximum of the hourglass error eta_i
-(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), hourglass (minus the work done by the hourglass
-forces), external work (body force and constraint reactions) and the balance
-total = kinetic + strain + hourglass - external, which is constant for an exact
-integration. Momenta: linear (vector) and angular (scalar in 2D, vector in 3D).
+(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), hourglass
+(minus the work done by the hourglass forces), external work (body force and constraint
+reactions) and the balance total = kinetic + strain + hourglass - external, which is
+constant for an exact integration. Momenta: linear (vector) and angular (scalar in 2D,
+vector in 3D).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from mpi4py import MPI
 
-
-def _sum(comm, values: np.ndarray) -> np.ndarray:
-    """Sum over ranks that is independent of the rank count up to the per-rank partial sums."""
-    parts = comm.allgather(np.asarray(values, dtype=np.float64))
-    total = np.zeros_like(parts[0])
-    for p in parts:
-        total = total + p
-    return total
+from parsph.exact_sum import allsum, sums, total
 
 
 def angular_momentum(x: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """x cross p of each particle: (n, 1) in 2D, (n, 3) in 3D, (n, 0) in 1D."""
     if x.shape[1] == 2:
-        return np.array([np.sum(x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0])])
+        return (x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0])[:, None]
     if x.shape[1] == 3:
-        return np.cross(x, p).sum(axis=0)
-    return np.zeros(0)
+        return np.cross(x, p)
+    return np.zeros((len(x), 0))
 
 
 def probe_values(probes: list, state) -> dict:
@@ -41,8 +39,8 @@ def probe_values(probes: list, state) -> dict:
             q = np.linalg.norm(q, axis=1) if probe["component"] < 0 else q[:, probe["component"]]
         how = probe["reduce"]
         if how in ("mean", "sum"):
-            total, count = _sum(comm, np.array([q.sum(), float(len(q))]))
-            out[probe["name"]] = total / count if how == "mean" else total
+            value = float(allsum(comm, [total(q)])[0])
+            out[probe["name"]] = value / comm.allreduce(len(q)) if how == "mean" else value
         elif how == "max":
             out[probe["name"]] = comm.allreduce(q.max() if len(q) else -np.inf, op=MPI.MAX)
         else:
@@ -51,38 +49,35 @@ def probe_values(probes: list, state) -> dict:
 
 
 def global_diagnostics(state) -> dict:
-    """Energies and momenta of the whole body (collective)."""
-    n = state.n_owned
-    m = state.mass[:n, None]
+    """Energies, momenta and disorder of the whole body (collective)."""
+    n, dim = state.n_owned, state.dim
+    m = state.mass[:n]
     v = state.v[:n]
     x = state.X[:n] + state.u[:n]
-    p = m * v
+    p = m[:, None] * v
     eta = state.disorder()
-    local = np.concatenate([
-        [np.sum(m[:, 0] * eta * eta), np.sum(m)],
-        [0.5 * np.sum(m * v * v), state.strain_energy_local,
-         state.hourglass_energy_local + state.hourglass_released_local,
-         state.external_work_local],
-        p.sum(axis=0), angular_momentum(x, p),
-    ])
-    total = _sum(state.comm, local)
-    disorder = np.sqrt(total[0] / total[1])
-    total = total[2:]
-    kinetic, strain, hourglass, external = total[:4]
-    dim = state.dim
+    # per-particle columns: m eta^2, m, kinetic energy per component, momentum, angular momentum
+    columns = np.column_stack([m * eta * eta, m, 0.5 * m[:, None] * v * v, p, angular_momentum(x, p)])
+    energies = state.energy_sums()
+    parts = allsum(state.comm, [*sums(columns), energies["strain"], energies["hourglass"],
+                                energies["external"]])
+    weighted, mass, kinetic = parts[0], parts[1], parts[2:2 + dim]
+    momentum, angular = parts[2 + dim:2 + 2 * dim], parts[2 + 2 * dim:-3]
+    strain, hourglass, external = parts[-3:]
+    kinetic = sum(kinetic[1:], kinetic[0])
     out = {
-        "kinetic_energy": kinetic, "strain_energy": strain, "hourglass_energy": hourglass,
-        "external_work": external, "total_energy": kinetic + strain + hourglass - external,
-        "disorder": disorder,
+        "kinetic_energy": float(kinetic), "strain_energy": float(strain),
+        "hourglass_energy": float(hourglass), "external_work": float(external),
+        "total_energy": float(kinetic + strain + hourglass - external),
+        "disorder": math.sqrt(float(weighted) / float(mass)),
         "disorder_max": state.comm.allreduce(eta.max() if len(eta) else 0.0, op=MPI.MAX),
     }
     for a, name in enumerate("xyz"[:dim]):
-        out[f"momentum_{name}"] = total[4 + a]
-    ang = total[4 + dim:]
+        out[f"momentum_{name}"] = float(momentum[a])
     if dim == 2:
-        out["angular_momentum"] = ang[0]
+        out["angular_momentum"] = float(angular[0])
     for a, name in enumerate("xyz" if dim == 3 else ""):
-        out[f"angular_momentum_{name}"] = ang[a]
+        out[f"angular_momentum_{name}"] = float(angular[a])
     return out
 
 

@@ -9,7 +9,9 @@ A step is velocity-Verlet (kick-drift-kick leap-frog):
      migration, ghosts, neighbours and corrections in X^r, forces again]
 Bracketed stages run only with Hessian stabilisation or the updated formulation. Local
 arrays hold the rank's owned particles first, then its ghosts. Only the stages a scene
-uses are compiled and run (formulations.tlsph).
+uses are compiled and run (formulations.tlsph). Sums over particles (energies, the work
+accumulated step by step, obstacle forces) are exact (exact_sum), so that the history, like
+the particle state, is the same bit for bit on any number of ranks.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from parsph import config
 from parsph.bc import BoundaryConditions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
+from parsph.exact_sum import Accumulator, Exact, allsum, total
 from parsph.formulations import reference, tlsph
 from parsph.materials.elastic import MODEL_IDS, first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
@@ -68,10 +71,10 @@ class Simulation:
         self.step_count = 0
         self.updates = 0  # reference updates so far
         self.since_update = 0  # steps since the last one
-        self.strain_energy_local = 0.0
-        self.hourglass_energy_local = 0.0
-        self.hourglass_released_local = 0.0  # penalty energy dropped at reference updates
-        self.external_work_local = 0.0
+        # running totals of the work done on this rank's particles, exact (exact_sum)
+        self.totals = {"hourglass_work": Accumulator(),  # absorbed by the "paper" hourglass forces
+                       "hourglass_released": Accumulator(),  # penalty dropped at reference updates
+                       "external_work": Accumulator()}
         self.walls = Walls(scene["walls"], scene["tools"], dim)
         self._adopt(local)
         n = self.n_owned
@@ -83,12 +86,15 @@ class Simulation:
             clock, totals = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
-            if comm.rank == 0:  # global totals, carried by rank 0
-                self.hourglass_energy_local = totals["hourglass_work"]
-                self.hourglass_released_local = totals.get("hourglass_released", 0.0)
-                self.external_work_local = totals["external_work"]
+            if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
+                for name, acc in self.totals.items():
+                    acc.set([Exact.from_json(totals[name])])
+                self.walls.restore(totals["wall_force"])
+        self._cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up, for messages
         self.compute_forces()
         self._external = self.external_force()  # at the current state, for the work integral
+        if scene["time"]["dt"] > 0:
+            self._cfl_at = (scene["time"]["cfl"] * self._stability()[0], self.step_count)
         self._stable_dt = restart["clock"]["dt"] if restart else self._stable_time_step()[0]
 
     # ----------------------------------------------------------------- set-up helpers
@@ -134,6 +140,7 @@ class Simulation:
         self.psi = np.zeros(keep)
         self.f_int = np.zeros((n, dim))
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
+        self.hg_psi = np.zeros(n if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL else 0)
         self.youngs = np.full(keep, self.constants.youngs)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
         self.walls.select(self.groups)
@@ -150,29 +157,47 @@ class Simulation:
         return 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
 
     def _stable_time_step(self) -> tuple:
-        """(CFL step, largest incremental log strain), both reduced over ranks: the step from
-        formulations.tlsph.stable_time_step (or the fixed dt), the strain for the adaptive
-        reference update (0 unless it is enabled)."""
+        """(size of the next step, largest incremental log strain): time.dt if fixed, else
+        time.cfl times the stable step; the strain for the adaptive reference update (0
+        unless it is enabled). Collective."""
         settings = self.scene["time"]
-        local = np.zeros(2)
-        if settings["dt"] == 0 or (self.updated and self.update_strain > 0):
-            dt, strain = tlsph.stable_time_step(
-                self.n_owned, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
-                self._omega_hg2, self.constants.wave_speed, self.model, self.dim)
-            local[:] = -dt, strain
-        if self.comm.size > 1:
-            self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MAX)
+        adaptive = self.updated and self.update_strain > 0
         if settings["dt"] > 0:
-            return settings["dt"], local[1]
-        dt = -settings["cfl"] * local[0]
-        if not dt > 0.0:
+            return settings["dt"], self._stability()[1] if adaptive else 0.0
+        step, strain = self._stability()
+        return settings["cfl"] * step, strain
+
+    def _stability(self) -> tuple:
+        """(stable step, largest incremental log strain) over all ranks, from
+        formulations.tlsph.stable_time_step (collective). A step of zero raises the error
+        naming the particle with the smallest step on any rank."""
+        dt, strain, smallest = tlsph.stable_time_step(
+            self.n_owned, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
+            self._omega_hg2, self.constants.wave_speed, self.model, self.dim)
+        reduced = np.array([-dt, strain])
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
+        if not -reduced[0] > 0.0:
+            mine = [] if smallest < 0 else [(dt, int(self.gid[smallest]),
+                                             tuple((self.X[smallest] + self.u[smallest]).tolist()))]
+            _, gid, x = min(c for part in self.comm.allgather(mine) for c in part)
+            where = ", ".join(f"{c:.6g}" for c in x)
             error = ParsphError(
                 f"the stable time step collapsed to zero at step {self.step_count}, t = {self.t:.6g}: "
-                "a particle is flattened (a principal stretch near zero); the run is unstable: raise "
-                "formulation.hourglass or refine the particles")
-            error.agreed = True  # every rank has the same reduced dt and raises this
+                f"particle {gid} at ({where}) is flattened (a principal stretch near zero); the run is "
+                f"unstable: {self._advice()}")
+            error.agreed = True  # every rank found the same particle and raises this
             raise error
-        return dt, local[1]
+        return -reduced[0], reduced[1]
+
+    def _advice(self) -> str:
+        """What to change when the run has become unstable."""
+        dt = self.scene["time"]["dt"]
+        if dt == 0:
+            return "reduce time.cfl, raise formulation.hourglass or refine the particles"
+        cfl = "" if self._cfl_at is None else \
+            " (the CFL step, time.cfl times the stable step, was {:.3g} s at step {})".format(*self._cfl_at)
+        return f"reduce time.dt = {dt:.3g} s{cfl}, raise formulation.hourglass or refine the particles"
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self) -> None:
@@ -194,10 +219,10 @@ class Simulation:
             self.decomp.refresh(self.f)
             t1 = clock()
             stages["halo"] += t1 - t2
-        energy, hg_energy, bad = self._kinematics_stress(
+        bad = self._kinematics_stress(
             n, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, self.d, self.volume, self.youngs,
             lam, mu, bulk, self.f, self.fs, self.F, self.Fr if self.updated else self.F, self.VP, self.J,
-            self.psi)
+            self.psi, self.hg_psi)
         t2 = clock()
         stages["kinematics+stress"] += t2 - t1
         if bad >= 0:
@@ -206,10 +231,7 @@ class Simulation:
             raise ParsphError(
                 f"particle {int(self.gid[bad])} at ({where}) is inverted or its stress is not finite "
                 f"(J = {self.J[bad]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
-                "unstable: reduce time.cfl, raise formulation.hourglass or refine the particles")
-        self.strain_energy_local = energy
-        if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
-            self.hourglass_energy_local = hg_energy
+                f"unstable: {self._advice()}")
         self.decomp.refresh(self.VP, *((self.fs,) if self.hourglass else ()))
         if self.eta > 0:
             self._hessian_transpose(n, ref.ptr, ref.idx, ref.gh, ref.gh_rev, self.VP, self.B)
@@ -247,19 +269,24 @@ class Simulation:
             v *= math.exp(-self.damping * dt)
         v += dt * self.acc
 
-    def step(self) -> float:
-        """Advance one time step (and update the reference if due); returns the step size."""
+    def step(self, t_end: float = math.inf) -> float:
+        """Advance one time step (and update the reference if due); returns the step size.
+        A step that would reach or pass `t_end` (to a relative 1e-12) is shortened to end
+        exactly at t_end."""
         start = time.perf_counter()
         inside = sum(self.stage_seconds.values())
         n = self.n_owned
         dt = self._stable_dt
+        t_new = self.t + dt
+        if t_new >= t_end * (1.0 - 1e-12):
+            dt, t_new = t_end - self.t, t_end
         u_old = self.u[:n].copy()
         f_hg_old = self.f_hg.copy()
         f_ext_old = self._external
         self._kick(0.5 * dt)
         self.bcs.set_velocity(self.v[:n], self.t + 0.5 * dt)
         self.u[:n] += dt * self.v[:n]
-        self.t += dt
+        self.t = t_new
         self.bcs.set_displacement(self.u[:n], self.t)
         self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
         self.compute_forces()
@@ -268,9 +295,9 @@ class Simulation:
         du = self.u[:n] - u_old
         if self.hourglass_form == tlsph.HOURGLASS_PAPER:
             # not a potential force: its energy is the work it has absorbed
-            self.hourglass_energy_local -= 0.5 * np.sum((f_hg_old + self.f_hg) * du)
+            self.totals["hourglass_work"].add(-0.5 * (f_hg_old + self.f_hg) * du)
         self._external = self.external_force()
-        self.external_work_local += 0.5 * np.sum((f_ext_old + self._external) * du)
+        self.totals["external_work"].add(0.5 * (f_ext_old + self._external) * du)
         self.step_count += 1
         self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
@@ -291,8 +318,7 @@ class Simulation:
         n = self.n_owned
         owned = dict(self._owned_fields(), gid=self.gid[:n], Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
-        if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
-            self.hourglass_released_local += self.hourglass_energy_local  # the penalty restarts at 0
+        self.totals["hourglass_released"].add(self.hg_psi)  # the penalty restarts at 0
         if self.comm.size > 1:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
@@ -304,8 +330,8 @@ class Simulation:
         except InputError as exc:  # the configuration, not the input, is at fault
             error = ParsphError(
                 f"reference update {self.updates + 1} at step {self.step_count}, t = {self.t:.6g} failed: "
-                f"{exc}. The particles are too disordered for a new reference: update earlier "
-                "(formulation.update_strain), raise the stabilisation or refine the particles")
+                f"{str(exc).rstrip('.')}. The particles are too disordered for a new reference: update "
+                "earlier (formulation.update_strain), raise the stabilisation or refine the particles")
             error.agreed = getattr(exc, "agreed", False)
             raise error from None
         self.stage_seconds["reference update"] += time.perf_counter() - start
@@ -325,23 +351,22 @@ class Simulation:
 
     @property
     def dt(self) -> float:
-        """The step size the next step will use."""
+        """The step size the next step will use (unless shortened to end at t_end)."""
         return self._stable_dt
 
     def checkpoint_state(self) -> dict:
         """Everything io.checkpoint stores (collective: totals): per-particle arrays of the
-        owned particles (with the updated reference, if any), and the accumulated totals."""
+        owned particles (with the updated reference, if any); the accumulated totals over all
+        ranks, exact (exact_sum.Exact.to_json), and the last step's obstacle forces."""
         n = self.n_owned
-        totals = np.array(self.comm.allgather((
-            self.hourglass_energy_local if self.hourglass_form == tlsph.HOURGLASS_PAPER else 0.0,
-            self.hourglass_released_local, self.external_work_local))).sum(axis=0)
+        totals = allsum(self.comm, [acc.sums()[0] for acc in self.totals.values()])
         fields = self._owned_fields()
         if self.updated:
             fields.update({k: getattr(self, k)[:n] for k in REFERENCE_STATE})
         return {
             "fields": fields, "group_names": self.group_names,
-            "totals": {"hourglass_work": float(totals[0]), "hourglass_released": float(totals[1]),
-                       "external_work": float(totals[2])},
+            "totals": {**{name: s.to_json() for name, s in zip(self.totals, totals)},
+                       "wall_force": self.wall_forces().tolist()},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
                       "since_update": self.since_update},
         }
@@ -406,13 +431,39 @@ class Simulation:
         dev = full - np.trace(full, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
         return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
 
+    def energy_sums(self) -> dict:
+        """This rank's parts of the energies, exact: strain (sum V^0 psi of the owned
+        particles), hourglass (their penalty, or the work absorbed on this rank by the paper
+        form, plus the penalty released at reference updates) and external work."""
+        n = self.n_owned
+        acc = {name: a.sums()[0] for name, a in self.totals.items()}
+        return {"strain": total(self.volume[:n] * self.psi[:n]),
+                "hourglass": total(self.hg_psi) + acc["hourglass_work"] + acc["hourglass_released"],
+                "external": acc["external_work"]}
+
+    @property
+    def strain_energy_local(self) -> float:
+        """This rank's strain energy (energy_sums)."""
+        return float(self.energy_sums()["strain"])
+
+    @property
+    def hourglass_energy_local(self) -> float:
+        """This rank's hourglass energy (energy_sums)."""
+        return float(self.energy_sums()["hourglass"])
+
+    def wall_forces(self) -> np.ndarray:
+        """Each wall's and tool's force on the body in the last step, (obstacles, dim), exact
+        sums over all ranks (collective)."""
+        sums = allsum(self.comm, self.walls.force_sums())
+        return np.array([float(s) for s in sums]).reshape(len(self.walls.items), self.dim)
+
     def diagnostics(self) -> dict:
+        """The history row: clock, global_diagnostics, obstacle forces and probes (collective)."""
         out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
                "reference_updates": float(self.updates)}
         out.update(global_diagnostics(self))
         if len(self.walls.items):
-            force = self.comm.allreduce(self.walls.force)
-            for label, f in zip(self.walls.names, force):
+            for label, f in zip(self.walls.names, self.wall_forces()):
                 for a, name in enumerate("xyz"[: self.dim]):
                     out[f"{label}_force_{name}"] = f[a]
         out.update(probe_values(self.scene["probes"], self))

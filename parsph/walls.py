@@ -8,13 +8,16 @@ a rounded box: a smaller box grown by the radius), as the punch of [V §2.4.3].
 After each drift a particle of the obstacle's group found inside it (signed gap < 0) is
 put back on its surface along the outward normal n and loses the part of its velocity
 relative to the obstacle that moves into it: a perfectly plastic, frictionless contact
-(the tangential velocity is untouched). The impulse the obstacle gives per step, over the
-step, is its contact force.
+(the tangential velocity is untouched). The impulse the obstacle gives a particle in a
+step, over the step, is its contact force on that particle; the obstacle's force is their
+exact sum (exact_sum), the same on any number of ranks.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from parsph.exact_sum import sums
 
 
 class Wall:
@@ -74,7 +77,9 @@ class Walls:
     def __init__(self, walls: list, tools: list, dim: int):
         self.items = [Wall(s) for s in walls] + [Tool(s) for s in tools]
         self.names = [f"wall{k}" for k in range(len(walls))] + [f"tool{k}" for k in range(len(tools))]
-        self.force = np.zeros((len(self.items), dim))  # of the last step, kept across select
+        self.dim = dim
+        # each obstacle's force on each particle it touched in the last step, kept across select
+        self.contacts = [np.zeros((0, dim)) for _ in self.items]
 
     def select(self, masks: dict) -> None:
         """Find each obstacle's particles among this rank's owned ones (group name -> bool
@@ -85,16 +90,28 @@ class Walls:
     def enforce(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float,
                 dt: float) -> None:
         """Put owned particles found inside an obstacle back on its surface; record each
-        obstacle's force on the particles."""
+        obstacle's force on each of them."""
         for k, item in enumerate(self.items):
-            self.force[k] = 0.0
             sel = item.index
             gap, normal = item.contact(X[sel] + u[sel], t)
             hit = gap < 0.0
-            if not hit.any():
-                continue
             sel, gap, normal = sel[hit], gap[hit], normal[hit]
             u[sel] -= gap[:, None] * normal
             approach = np.minimum(np.einsum("na,na->n", v[sel] - item.velocity, normal), 0.0)
             v[sel] -= approach[:, None] * normal
-            self.force[k] = -np.einsum("n,na->a", mass[sel] * approach, normal) / dt
+            self.contacts[k] = -(mass[sel] * approach)[:, None] * normal / dt
+
+    def force_sums(self) -> list:
+        """Each obstacle's force on this rank's particles, exact (obstacle-major, then
+        component)."""
+        return [s for c in self.contacts for s in sums(c)]
+
+    @property
+    def force(self) -> np.ndarray:
+        """Each obstacle's force on this rank's particles, (obstacles, dim)."""
+        return np.array([float(s) for s in self.force_sums()]).reshape(len(self.items), self.dim)
+
+    def restore(self, forces) -> None:
+        """Take `forces` (obstacles x dim) as the last step's obstacle forces (restart: the
+        global forces, carried by one rank)."""
+        self.contacts = [np.array([f], float) for f in forces]

@@ -98,12 +98,13 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int, update
 
     @njit(cache=True)
     def kinematics_stress(n, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, lam, mu, bulk, f, fs, F,
-                          Fr, VP, J, psi):
-        """Stage 1 for particles 0..n-1; returns (strain energy, hourglass potential,
-        first inverted particle or -1)."""
+                          Fr, VP, J, psi, hg_psi):
+        """Stage 1 for particles 0..n-1, with each particle's strain energy density psi
+        and (variational form) hourglass penalty hg_psi; returns the first inverted
+        particle or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
         return _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, dx, hgc, d,
-                           volume, youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi)
+                           volume, youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi, hg_psi)
 
     @njit(cache=True)
     def hessian_transpose(n, ptr, idx, gh, gh_rev, VP, B):
@@ -153,14 +154,12 @@ def _gradient(dim, n, ptr, idx, g, d, f):
 
 @njit(cache=True, inline="always")
 def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, dx, hgc, d, volume,
-                youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi):
+                youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi, hg_psi):
     P = np.empty((dim, dim))
     S = np.empty((dim, dim))
     C = np.empty((dim, dim))
     Cinv = np.empty((dim, dim))
     err = np.empty(dim)
-    energy = 0.0
-    hg_energy = 0.0
     first_bad = -1
     for i in range(n):
         # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
@@ -188,7 +187,6 @@ def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, 
         if not (math.isfinite(e) and J[i] > 0.0) and first_bad < 0:
             first_bad = i
         psi[i] = e
-        energy += volume[i] * e
         for a in range(dim):
             for b in range(dim):
                 if updated:  # V0 P F^rT [V eq. 14]
@@ -200,6 +198,7 @@ def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, 
                     VP[i, a, b] = volume[i] * P[a, b]
         if hourglass == HOURGLASS_VARIATIONAL:
             # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
+            phi = 0.0
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
                 k = hgc[p] * youngs[i]
@@ -210,11 +209,12 @@ def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, 
                         fx += fs[i, a, b] * dx[p, b]
                     err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
                     e2 += err[a] * err[a]
-                hg_energy += 0.5 * k * e2
+                phi += 0.5 * k * e2
                 for a in range(dim):
                     for b in range(dim):
                         VP[i, a, b] += k * err[a] * dx[p, b]
-    return energy, hg_energy, first_bad
+            hg_psi[i] = phi
+    return first_bad
 
 
 @njit(cache=True, inline="always")
@@ -376,10 +376,12 @@ def stable_time_step(n, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, mode
     for the neo-Hookean laws (their tangent moduli), and sqrt(stab_i) for the stiffening by
     Hessian stabilisation (formulations.reference). The strain max |ln s| over the
     principal stretches of fs is the distortion measure of the adaptive reference update.
-    In the total-Lagrangian formulation fs and F are the same array. A flattened or
-    inverted particle gives (0, inf)."""
+    In the total-Lagrangian formulation fs and F are the same array. Also returns the first
+    particle with the smallest step (-1 if n = 0); the first flattened or inverted particle
+    i gives (0, inf, i)."""
     dt = np.inf
     worst = 0.0
+    smallest = -1
     for i in range(n):
         s_min, s_max = principal_stretches(F[i], dim)
         f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim)
@@ -389,8 +391,10 @@ def stable_time_step(n, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, mode
             stiffening = max(1.0, 1.0 - math.log(J[i])) if J[i] > 0 else np.inf
         length = min_spacing[i] * min(1.0, f_min)
         if not (length > 0.0 and stiffening < np.inf):
-            return 0.0, np.inf  # no stable step
+            return 0.0, np.inf, i  # no stable step
         worst = max(worst, math.log(f_max), -math.log(f_min))
         w_el = 2.0 * wave_speed * math.sqrt(stiffening * stab[i]) / length
-        dt = min(dt, 2.0 / math.sqrt(w_el * w_el + omega_hg2[i]))
-    return dt, worst
+        dt_i = 2.0 / math.sqrt(w_el * w_el + omega_hg2[i])
+        if dt_i < dt:
+            dt, smallest = dt_i, i
+    return dt, worst, smallest
