@@ -211,7 +211,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
             if out["snapshot_interval"] > 0:
                 snapshot()
         while sim.t < end and not (max_steps and sim.step_count >= max_steps):
-            dt = sim.step()
+            dt = sim.step(end)
             progress.update(sim.step_count, sim.t, dt)
             if sim.step_count - steps_at_start == 10:
                 warn_if_endless(sim, end, max_steps, time.perf_counter() - loop_start, 10)
