@@ -100,7 +100,7 @@ def test_exact_sum_survives_json_and_a_single_rank_allsum():
 
 
 # ---- the same history on 1 and 3 ranks
-# 30 x 10 particles, updated reference every 7 steps (ownership re-decided at each update),
+# 24 x 8 particles, updated reference every 7 steps (ownership re-decided at each update),
 # a tool pressing on the top, a wall on the left, the bottom driven up (reactions: external
 # work) under gravity; probes reduced by sum and mean.
 SCENE = """
@@ -111,7 +111,7 @@ dimension = 2
 shape = "box"
 lower = [0.0, 0.0]
 upper = [0.06, 0.02]
-spacing = 2.0e-3
+spacing = 2.5e-3
 [kernel]
 type = "wendland_c2"
 support = 2.2
@@ -142,10 +142,10 @@ components = [1]
 type = "velocity"
 value = [-1.0, 0.0]
 [[walls]]
-point = [0.0, 0.0]
+point = [1.1e-3, 0.0]
 normal = [1.0, 0.0]
 [[tools]]
-lower = [0.02, 0.019]
+lower = [0.02, 0.0186]
 upper = [0.04, 0.03]
 radius = 2.0e-3
 velocity = [0.0, -1.0]
@@ -210,29 +210,33 @@ def assert_same_run(a, b):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("variant", sorted(VARIANTS))
-def test_history_is_the_same_bit_for_bit_on_1_and_3_ranks(tmp_path, variant):
-    runs = [run_scene(tmp_path, variant, VARIANTS[variant], n, "--set", "time.max_steps=150")
+def test_history_is_the_same_bit_for_bit_on_1_and_3_ranks(tmp_path):
+    """The variational hourglass form with Hessian stabilisation (the paper form, with its
+    step-by-step work total, is compared across rank counts through a restart below)."""
+    variant = "variational_hessian"
+    runs = [run_scene(tmp_path, variant, VARIANTS[variant], n, "--set", "time.max_steps=84")
             for n in (1, 3)]
     h = assert_same_run(*runs)
-    assert h["reference_updates"][-1] == 21
+    assert h["reference_updates"][-1] == 12
     assert np.abs(h["tool0_force_y"]).max() > 0 and np.abs(h["wall0_force_x"]).max() > 0  # contact
     assert np.abs(h["external_work"]).max() > 0 and np.abs(h["hourglass_energy"]).max() > 0
 
 
 @pytest.mark.mpi
 def test_restart_on_other_rank_counts_continues_every_history_series_bit_for_bit(tmp_path):
-    """Straight on 2 ranks; split: 1 rank to a checkpoint between updates (step 60), 3 ranks on."""
+    """The paper hourglass form (work absorbed step by step): straight on 2 ranks; split: 1
+    rank to a checkpoint between updates (step 45), 3 ranks on."""
     text = VARIANTS["paper"]
-    straight = run_scene(tmp_path, "straight", text, 2, "--set", "time.max_steps=120")
-    split = run_scene(tmp_path, "split", text, 1, "--set", "time.max_steps=60",
-                      "--set", "output.checkpoint_every=60")
+    straight = run_scene(tmp_path, "straight", text, 2, "--set", "time.max_steps=90")
+    split = run_scene(tmp_path, "split", text, 1, "--set", "time.max_steps=45",
+                      "--set", "output.checkpoint_every=45")
     scene = tmp_path / "split.toml"
-    proc = parsph(["run", scene, "--out", split, "--quiet", "--set", "time.max_steps=120",
+    proc = parsph(["run", scene, "--out", split, "--quiet", "--set", "time.max_steps=90",
                    "--restart", "latest"], ranks=3)
     assert proc.returncode == 0, proc.stderr
     h = assert_same_run(straight, split)
-    assert np.array_equal(h["step"], np.arange(121))
+    assert np.array_equal(h["step"], np.arange(91))
+    assert np.abs(h["tool0_force_y"]).max() > 0 and np.abs(h["hourglass_energy"]).max() > 0
 
 
 # ---- the last step
