@@ -183,10 +183,10 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         if debug:
             check_particle_ids(sim)
         values = sim.diagnostics()
-        output_dir.ensure_space(out_dir, history.row_bytes(len(values)) if history is not None else 0,
-                                f"the history row at step {sim.step_count}")
-        with collective():
+        with collective():  # one agreement for the space check and the write
             if history is not None:
+                output_dir.check_space(out_dir, history.row_bytes(len(values)),
+                                       f"the history row at step {sim.step_count}")
                 history.append(values)
         sim.stage_seconds["diagnostics+history"] += time.perf_counter() - start
         return sim.step_count

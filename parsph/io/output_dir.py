@@ -95,15 +95,20 @@ def claim_output(out_dir: str, present: list) -> None:
                 say(f"replacing the previous run in {out_dir} (--overwrite)")
 
 
+def check_space(out_dir: str, nbytes: int, what: str) -> None:
+    """Raise OutputFull if the disk of `out_dir` has less than `nbytes` (plus a margin)
+    free, so that `what` is not written half-way (on the rank that writes)."""
+    free = shutil.disk_usage(out_dir).free
+    if free < nbytes + SPACE_MARGIN:
+        raise OutputFull(f"the disk holding {out_dir} is full: {what} needs about "
+                         f"{_size(nbytes + SPACE_MARGIN)}, {_size(free)} free")
+
+
 def ensure_space(out_dir: str, nbytes: int, what: str) -> None:
-    """Collective: raise the same ParsphError on every rank if the disk of `out_dir` has
-    less than `nbytes` (plus a margin) free, so that `what` is not written half-way."""
+    """Collective: check_space on rank 0, the same OutputFull raised on every rank."""
     with collective():
         if COMM.rank == 0:
-            free = shutil.disk_usage(out_dir).free
-            if free < nbytes + SPACE_MARGIN:
-                raise OutputFull(f"the disk holding {out_dir} is full: {what} needs about "
-                                 f"{_size(nbytes + SPACE_MARGIN)}, {_size(free)} free")
+            check_space(out_dir, nbytes, what)
 
 
 class OutputFull(ParsphError):
