@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsph import geometry
+from parsph import config, geometry
 from parsph.errors import InputError
 from parsph.parallel.decomposition import LocalBody, add_ghosts, block_cuts, nearby, partition
 from parsph.parallel.runtime import collective, warn
@@ -21,24 +21,25 @@ PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": 
          "ring": geometry.Ring, "disk": geometry.Disk}
 
 
-def _generators(scene: dict) -> list:
-    """The part generators of `scene`, checked (arguments, dimension) without building."""
-    gens, dim = [], scene["scene"]["dimension"]
-    for i, part in enumerate(scene["geometry"]["parts"]):
+def _generators(parts: list, where: str, dim: int) -> list:
+    """The part generators of one body's `parts` (named `where` in messages), checked
+    (arguments, dimension) without building."""
+    gens = []
+    for i, part in enumerate(parts):
         args = {k: v for k, v in part.items() if k != "shape"}
         try:
             gens.append(PARTS[part["shape"]](**args))
         except ValueError as exc:
-            raise InputError(f"geometry.parts[{i}]: {exc}") from None
+            raise InputError(f"{where}[{i}]: {exc}") from None
         if gens[-1].blockwise and gens[-1].count:
             part_dim = gens[-1].rows(0, 1)[0].shape[1]
             if part_dim != dim:
-                raise InputError(f"geometry.parts[{i}]: a {part_dim}D {part['shape']} in a {dim}D scene")
+                raise InputError(f"{where}[{i}]: a {part_dim}D {part['shape']} in a {dim}D scene")
     total = sum(g.count for g in gens)
     if total == 0:
-        raise InputError("geometry.parts produce zero particles; check the shapes' sizes and spacing")
+        raise InputError(f"{where} produce zero particles; check the shapes' sizes and spacing")
     if total > geometry.MAX_PARTICLES:
-        raise InputError(f"geometry.parts produce {total} particles in all, more than 2^31")
+        raise InputError(f"{where} produce {total} particles in all, more than 2^31")
     return gens
 
 
@@ -138,38 +139,62 @@ def _neighbour_support(x: np.ndarray, target: int, comm) -> np.ndarray:
         reach *= 2.0
 
 
-def build_particles(scene: dict, comm) -> dict:
-    """This rank's owned particles of `scene` (arrays by global id: "gid", "X", "measure",
-    "volume", "mass", "support", "groups" as uint8 columns by sorted group name).
-    Collective; raises InputError on every rank for an empty or degenerate set."""
+def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> dict:
+    """This rank's owned particles of one body (its parts united): "gid" numbered densely
+    from 0, "X", "measure", "volume", "mass", "support"."""
     dim = scene["scene"]["dimension"]
-    with collective(comm):
-        gens = _generators(scene)
-        total = sum(g.count for g in gens)
-        neighbours = scene["kernel"]["neighbours"]
-        if neighbours > 0 and neighbours + 2 > total:
-            raise InputError(f"kernel.neighbours = {neighbours} needs at least {neighbours + 2} "
-                             f"particles, the scene has {total}")
     owned = partition(_block(gens, dim, comm), "X", comm)
     if len(gens) > 1:
         smallest = min(m for m in comm.allgather(float(owned["measure"].min()) if len(owned["X"]) else None)
                        if m is not None)
-        parts = scene["geometry"]["parts"]
+        parts = body["parts"]
         spacing = np.array([_part_spacing(part) for part in parts])
         owned, close = _join_parts(owned, np.cumsum([0] + [g.count for g in gens]), spacing,
                                    1e-6 * smallest ** (1.0 / dim), comm)
         for q, p in zip(*np.nonzero(close)):
-            warn(f"geometry.parts[{q}] and geometry.parts[{p}] overlap: {close[q, p]} particles of "
+            warn(f"{where}[{q}] and {where}[{p}] overlap: {close[q, p]} particles of "
                  f"parts[{p}] lie within half a spacing ({0.5 * min(spacing[q], spacing[p]):g}) of "
                  f"parts[{q}]'s particles (not coincident, so both are kept and the density doubles there)")
     X, measure = owned["X"], owned["measure"]
     factor = {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[dim]
     owned["volume"] = measure * factor
-    owned["mass"] = owned["volume"] * scene["material"]["density"]
+    owned["mass"] = owned["volume"] * body["material"]["density"]
+    neighbours = scene["kernel"]["neighbours"]
     if neighbours > 0:
         owned["support"] = _neighbour_support(X, neighbours, comm)
     else:
-        owned["support"] = scene["kernel"]["support"] * _spacing(scene["geometry"]["parts"], measure, dim)
+        owned["support"] = scene["kernel"]["support"] * _spacing(body["parts"], measure, dim)
+    return owned
+
+
+def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
+    """This rank's owned particles of `scene` (arrays by global id: "gid", "X", "measure",
+    "volume", "mass", "support", "groups" as uint8 columns by sorted group name), and the
+    first global id of each body (with the total at the end): bodies are numbered one
+    after the other. Collective; raises InputError on every rank for an empty or
+    degenerate set."""
+    dim = scene["scene"]["dimension"]
+    specs = config.bodies(scene)
+    many = len(specs) > 1
+    wheres = [f"bodies[{b}].parts" if many else "geometry.parts" for b in range(len(specs))]
+    with collective(comm):
+        gens = [_generators(body["parts"], where, dim) for body, where in zip(specs, wheres)]
+        total = sum(g.count for body_gens in gens for g in body_gens)
+        if total > geometry.MAX_PARTICLES:
+            raise InputError(f"the bodies produce {total} particles in all, more than 2^31")
+        neighbours = scene["kernel"]["neighbours"]
+        if neighbours > 0 and neighbours + 2 > total:
+            raise InputError(f"kernel.neighbours = {neighbours} needs at least {neighbours + 2} "
+                             f"particles, the scene has {total}")
+    blocks, offsets = [], [0]
+    for body, where, body_gens in zip(specs, wheres, gens):
+        owned = _body_particles(scene, body, where, body_gens, comm)
+        owned["gid"] = owned["gid"] + offsets[-1]
+        blocks.append(owned)
+        offsets.append(offsets[-1] + comm.allreduce(len(owned["gid"])))
+    owned = blocks[0] if not many else partition(
+        {k: np.concatenate([b[k] for b in blocks]) for k in blocks[0]}, "X", comm)
+    X, measure = owned["X"], owned["measure"]
     names = sorted(scene["groups"])
     groups = np.zeros((len(X), len(names)), np.uint8)
     with collective(comm):
@@ -185,9 +210,17 @@ def build_particles(scene: dict, comm) -> dict:
         for name in sorted(used):
             if not counts[names.index(name)]:
                 raise InputError(f"group '{name}' selects no particles; check groups.{name}")
-    return owned
+    return owned, np.array(offsets, np.int64)
+
+
+def build_particles(scene: dict, comm) -> dict:
+    """This rank's owned particles of `scene` (build_bodies without the body offsets)."""
+    return build_bodies(scene, comm)[0]
 
 
 def build_local(scene: dict, comm) -> LocalBody:
-    """This rank's particles of `scene` with their ghost layers, ready for the solver."""
-    return add_ghosts(build_particles(scene, comm), "X", comm)
+    """This rank's particles of `scene` with their ghost layers, ready for the simulation."""
+    owned, offsets = build_bodies(scene, comm)
+    local = add_ghosts(owned, "X", comm)
+    local.offsets = offsets
+    return local

@@ -21,7 +21,9 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from parsph import quantities
 from parsph.errors import InputError
+from parsph.materials import ELASTIC_KEYS, LAWS
 
 REQUIRED = object()
 
@@ -63,17 +65,21 @@ def in_range(lo, hi, lo_open=False, hi_open=False):
 
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
-MATERIALS = ("saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible")
-PROBE_QUANTITIES = ("displacement", "velocity", "position", "reaction", "force", "J", "von_mises",
-                    "disorder", "spacing_ratio")
-SNAPSHOT_FIELDS = PROBE_QUANTITIES + ("rank", "reference_position", "cauchy_stress")
+MATERIALS = tuple(LAWS)
+FORMULATIONS = ("tlsph", "ulsph", "sph", "rlm")
 
 
 def snapshot_fields(v):
-    unknown = [f for f in v if f not in SNAPSHOT_FIELDS]
+    known = quantities.snapshot_names()
+    unknown = [f for f in v if f not in known]
     if unknown:
-        return f"has unknown field(s) {unknown}; choose from {', '.join(SNAPSHOT_FIELDS)}"
+        return f"has unknown field(s) {unknown}; choose from {', '.join(known)}"
     return None if "position" in v else "must include 'position' (the snapshot geometry)"
+
+
+def probe_quantity(v):
+    known = quantities.probe_names()
+    return None if v in known else f"must be one of {', '.join(map(repr, known))}"
 
 
 SECTIONS: dict[str, dict[str, Key]] = {
@@ -103,8 +109,10 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "bulk_modulus": Key("float", None, positive, "[Pa]"),
     },
     "formulation": {
-        "type": Key("str", "tlsph", one_of("tlsph", "ulsph"),
-                    "tlsph: total-Lagrangian; ulsph: updated reference [V §3.1]"),
+        "type": Key("str", "tlsph", one_of(*FORMULATIONS),
+                    "tlsph: corrected SPH, total-Lagrangian [G]; ulsph: the same from an updated "
+                    "reference [V §3.1]; sph: symmetrised SPH; rlm: Randles-Libersky normalisation "
+                    "[R Table 1] (Lagrangian kernel, nodal integration)"),
         "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
         "hessian_correction": Key("str", "weighted", one_of("weighted", "paper"),
                                   "linear correction of the kernel Hessian: weighted: the A term "
@@ -115,7 +123,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
                              "ulsph: update when the largest principal log strain since the reference "
                              "exceeds this (0 = off)"),
         "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
-        "hourglass": Key("float", 50.0, non_negative, "hourglass coefficient alpha [G eq. 31]"),
+        "hourglass": Key("float", None, non_negative,
+                         "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
+                         "0 for sph and rlm (the methods as [R] compares them)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
     },
@@ -214,13 +224,13 @@ INITIAL_KEYS = {
 PROBE_KEYS = {
     "name": Key("str", REQUIRED),
     "group": Key("str", REQUIRED),
-    "quantity": Key("str", REQUIRED, one_of(*PROBE_QUANTITIES)),
+    "quantity": Key("str", REQUIRED, probe_quantity),
     "component": Key("int", -1, doc="vector component, -1 for the norm / scalar quantities"),
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "tools", "symmetry", "initial",
-                               "probes")
+                               "probes", "bodies")
 
 
 def _suggest(name: str, known) -> str:
@@ -304,10 +314,10 @@ def _array(path: str, raw: Any) -> list:
     return raw
 
 
-def _validate_parts(raw_parts, dim: int) -> list[dict]:
+def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts") -> list[dict]:
     parts = []
-    for i, raw in enumerate(_array("geometry.parts", raw_parts)):
-        path = f"geometry.parts[{i}]"
+    for i, raw in enumerate(_array(where, raw_parts)):
+        path = f"{where}[{i}]"
         shape = raw.get("shape", None)
         if shape not in PART_KEYS:
             if shape is None:
@@ -326,22 +336,19 @@ def _validate_parts(raw_parts, dim: int) -> list[dict]:
             raise InputError(f"{path}.inner_radius must be < outer_radius")
         parts.append(part)
     if not parts:
-        raise InputError("geometry.parts is empty: a scene needs at least one shape ([[geometry.parts]])")
+        raise InputError(f"{where} is empty: a body needs at least one shape ([[{where}]])")
     return parts
 
 
-def _validate_material(mat: dict, dim: int) -> None:
-    model = mat["model"]
-    if model == "neo_hookean_nearly_incompressible":
-        need, forbid = ("shear_modulus", "bulk_modulus"), ("youngs_modulus", "poisson_ratio")
-    else:
-        need, forbid = ("youngs_modulus", "poisson_ratio"), ("shear_modulus", "bulk_modulus")
-    for k in need:
+def _validate_material(path: str, mat: dict) -> None:
+    """The law's constants given, and no constant it does not take."""
+    law = LAWS[mat["model"]]
+    for k in law.takes:
         if mat[k] is None:
-            raise InputError(f"missing required key 'material.{k}' for model '{model}'")
-    for k in forbid:
-        if mat[k] is not None:
-            raise InputError(f"material.{k} does not apply to model '{model}' (it takes {' and '.join(need)})")
+            raise InputError(f"missing required key '{path}.{k}' for model '{law.name}'")
+    for k in ELASTIC_KEYS:
+        if k not in law.takes and mat[k] is not None:
+            raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {' and '.join(law.takes)})")
 
 
 def _validate_groups(raw: Any, dim: int) -> dict:
@@ -552,6 +559,63 @@ def substitute_parameters(raw: dict) -> dict:
     return walk(raw, "")
 
 
+def _formulation(path: str, raw: Any, dim: int) -> dict:
+    """A resolved formulation table: defaults by type, update triggers checked."""
+    form = _table(path, raw, SECTIONS["formulation"], dim)
+    if form["hourglass"] is None:
+        form["hourglass"] = 50.0 if form["type"] in ("tlsph", "ulsph") else 0.0
+    if form["type"] == "ulsph" and not (form["update_every"] or form["update_strain"]):
+        raise InputError(f"{path}.type = 'ulsph' needs an update trigger: {path}.update_every "
+                         f"(steps) or {path}.update_strain (log strain)")
+    if form["type"] != "ulsph" and (form["update_every"] or form["update_strain"]):
+        raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
+    if form["type"] in ("sph", "rlm") and form["force_form"] != "pair":
+        raise InputError(f"{path}.force_form applies to tlsph and ulsph; {form['type']} has its own force row")
+    return form
+
+
+BODY_KEYS = {
+    "name": Key("str", REQUIRED, doc="the body's name (history columns NAME.BODY)"),
+    "parts": Key("table", REQUIRED, doc="array of shapes, united, as geometry.parts"),
+    "material": Key("table", REQUIRED, doc="the body's material, as [material]"),
+    "formulation": Key("table", {}, doc="keys of [formulation] that differ for this body"),
+}
+
+
+def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
+    """The [[bodies]] tables: each with its parts, material and formulation (the top-level
+    [formulation] with the body's own keys over it)."""
+    out, names = [], set()
+    for i, raw in enumerate(_array("bodies", raw_bodies)):
+        path = f"bodies[{i}]"
+        body = _table(path, raw, BODY_KEYS, dim)
+        if body["name"] in names or not body["name"].isidentifier():
+            raise InputError(f"{path}.name must be a distinct identifier (letters, digits, _), got {body['name']!r}")
+        names.add(body["name"])
+        body["parts"] = _validate_parts(body["parts"], dim, f"{path}.parts")
+        body["material"] = _table(f"{path}.material", body["material"], SECTIONS["material"], dim)
+        _validate_material(f"{path}.material", body["material"])
+        if not isinstance(body["formulation"], dict):
+            raise InputError(f"{path}.formulation must be a table")
+        merged = dict(raw_formulation if isinstance(raw_formulation, dict) else {}, **body["formulation"])
+        body["formulation"] = _formulation(f"{path}.formulation", merged, dim)
+        out.append(body)
+    if not out:
+        raise InputError("bodies is empty: give at least one [[bodies]] table, or none and a [material]")
+    if len(out) > 1 and any(b["formulation"]["type"] == "ulsph" or b["formulation"]["hessian"] > 0 for b in out):
+        raise InputError("formulation.type = 'ulsph' and formulation.hessian need a scene of one body")
+    return out
+
+
+def bodies(scene: dict) -> list:
+    """The scene's bodies: its [[bodies]], or the one body of geometry.parts, [material] and
+    [formulation] (named "body")."""
+    if "bodies" in scene:
+        return scene["bodies"]
+    return [{"name": "body", "parts": scene["geometry"]["parts"], "material": scene["material"],
+             "formulation": scene["formulation"]}]
+
+
 def validate(raw: dict) -> dict:
     """Check a raw scene dict and return the resolved scene (defaults filled in).
 
@@ -567,22 +631,34 @@ def validate(raw: dict) -> dict:
         raise InputError("missing required key 'scene.dimension'")
     scene: dict[str, Any] = {}
     dim = None
+    multi = "bodies" in raw
     for section, keys in SECTIONS.items():
-        scene[section] = _table(section, raw.get(section, {}), keys, dim)
+        if multi and section == "material":
+            if "material" in raw:
+                raise InputError("a scene with [[bodies]] gives each body its own [bodies.material]; "
+                                 "remove the top-level [material]")
+            continue
+        given = raw.get(section, {})
+        if multi and section == "geometry":
+            if isinstance(given, dict) and "parts" in given:
+                raise InputError("a scene with [[bodies]] gives each body its own [[bodies.parts]]; "
+                                 "remove geometry.parts")
+            given = dict(given, parts=[]) if isinstance(given, dict) else given
+        if section == "formulation":
+            scene[section] = _formulation("formulation", given, dim)
+            continue
+        scene[section] = _table(section, given, keys, dim)
         if section == "scene":
             dim = scene["scene"]["dimension"]
-    scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
-    _validate_material(scene["material"], dim)
+    if multi:
+        scene["bodies"] = _validate_bodies(raw["bodies"], raw.get("formulation", {}), dim)
+    else:
+        scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
+        _validate_material("material", scene["material"])
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
-    form = scene["formulation"]
-    if form["type"] == "ulsph" and not (form["update_every"] or form["update_strain"]):
-        raise InputError("formulation.type = 'ulsph' needs an update trigger: formulation.update_every "
-                         "(steps) or formulation.update_strain (log strain)")
-    if form["type"] == "tlsph" and (form["update_every"] or form["update_strain"]):
-        raise InputError("formulation.update_every/update_strain apply to formulation.type = 'ulsph' only")
     scene["groups"] = _validate_groups(raw.get("groups"), dim)
     _validate_lists(scene, raw, dim)
-    if scene["symmetry"] and form["hessian"] > 0:
+    if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):
         raise InputError(
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
@@ -665,29 +741,3 @@ def load(path: str, overrides: list[str] = ()) -> dict:
 def to_json(scene: dict) -> str:
     """The resolved scene as canonical JSON (stored in every output file)."""
     return json.dumps(scene, sort_keys=True)
-
-
-@dataclass
-class Derived:
-    """Material constants derived from the resolved scene."""
-
-    lam: float
-    mu: float
-    bulk: float
-    youngs: float
-    wave_speed: float
-
-
-def material_constants(material: dict) -> Derived:
-    """Lame constants, Young's modulus and P-wave speed of the scene's material."""
-    rho = material["density"]
-    if material["model"] == "neo_hookean_nearly_incompressible":
-        mu, k = material["shear_modulus"], material["bulk_modulus"]
-        lam = k - 2.0 * mu / 3.0
-        youngs = 9.0 * k * mu / (3.0 * k + mu)
-    else:
-        youngs, nu = material["youngs_modulus"], material["poisson_ratio"]
-        lam = youngs * nu / ((1 + nu) * (1 - 2 * nu))
-        mu = youngs / (2 * (1 + nu))
-        k = lam + 2.0 * mu / 3.0
-    return Derived(lam=lam, mu=mu, bulk=k, youngs=youngs, wave_speed=math.sqrt((lam + 2 * mu) / rho))

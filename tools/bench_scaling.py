@@ -32,7 +32,7 @@ def worker(side: int, steps: int) -> None:
 
     from parsph import config
     from parsph.build import build_local
-    from parsph.solver import Simulation
+    from parsph.simulation import Simulation
 
     comm = MPI.COMM_WORLD
     spacing = 1.0 / side

@@ -28,7 +28,7 @@ from mpi4py import MPI  # noqa: E402
 
 from parsph import config  # noqa: E402
 from parsph.build import build_local  # noqa: E402
-from parsph.solver import Simulation  # noqa: E402
+from parsph.simulation import Simulation  # noqa: E402
 
 
 def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0) -> dict:

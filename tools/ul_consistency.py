@@ -33,7 +33,7 @@ def main() -> None:
 
     from parsph import config
     from parsph.build import build_local
-    from parsph.solver import Simulation
+    from parsph.simulation import Simulation
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene")

@@ -25,7 +25,7 @@ from parsph.errors import ParsphError
 from parsph.formulations import tlsph
 from parsph.kernels.correction import reference_pairs, reverse_values
 from parsph.kernels.hessian import corrected_hessians
-from parsph.neighbors import find_pairs
+from parsph.neighbors import find_pairs, within_bodies
 
 
 @dataclass
@@ -50,12 +50,28 @@ class ReferenceData:
     stiffening: np.ndarray  # how much the stabilisation stiffens each owned particle (>= 1)
 
 
-def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str,
-          hourglass_form: int, alpha: float, eta: float, weighted_hessian: bool) -> ReferenceData:
+@dataclass(frozen=True)
+class PairOptions:
+    """What one body's reference data needs: corrected gradients (False: plain SPH), the
+    hourglass form (tlsph.HOURGLASS_*) and coefficient alpha."""
+
+    corrected: bool
+    hourglass_form: int
+    alpha: float
+
+
+def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str, body: np.ndarray,
+          options: list, eta: float, weighted_hessian: bool) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
-    and layer-1 ghosts) are built to provide the reverse coefficients g_ji."""
+    and layer-1 ghosts) are built to provide the reverse coefficients g_ji. `body` is each
+    local particle's body index and options[b] its body's PairOptions; particles of
+    different bodies are not neighbours."""
     pairs = find_pairs(X, support, gid, n_rows)
-    ref = reference_pairs(X, measure, support, gid, pairs, kernel)
+    if len(options) > 1:
+        pairs = within_bodies(pairs, body)
+    corrected = np.array([o.corrected for o in options])
+    ref = reference_pairs(X, measure, support, gid, pairs, kernel,
+                          None if corrected.all() else corrected[body[:n_rows]])
     n = n_owned
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
@@ -64,9 +80,16 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         raise ParsphError("internal: a neighbour of an owned particle has no reference row")
     rows = pairs.row_of_pair()[:end]
     hgc, hreg = np.zeros(0), np.zeros(0)
-    if hourglass_form:
-        hgc, hreg = tlsph.hourglass_coefficients(hourglass_form, rows, idx, ref.dx[:end], ref.w[:end],
-                                                 ref.h[:end], volume, measure, alpha)
+    if any(o.hourglass_form for o in options):
+        hgc, hreg = np.zeros(end), np.zeros(end)
+        for b, o in enumerate(options):
+            sel = np.flatnonzero(body[rows] == b)
+            if o.hourglass_form and len(sel):
+                hgc[sel], reg = tlsph.hourglass_coefficients(
+                    o.hourglass_form, rows[sel], idx[sel], ref.dx[sel], ref.w[sel], ref.h[sel], volume,
+                    measure, o.alpha)
+                if len(reg):
+                    hreg[sel] = reg
     dim = X.shape[1]
     q = q_rev = np.zeros((0, dim))
     gh = gh_rev = np.zeros(0)

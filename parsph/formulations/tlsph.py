@@ -52,8 +52,8 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.materials import elastic
-from parsph.materials.elastic import SAINT_VENANT_KIRCHHOFF, det, right_cauchy_green, stress
+from parsph.materials import elastic, update
+from parsph.materials.elastic import det, right_cauchy_green
 
 
 def _source_hash() -> str:
@@ -62,7 +62,7 @@ def _source_hash() -> str:
     this hash makes any change to these files (or a process still running old code) miss
     the stale cache entries instead of loading them."""
     digest = hashlib.sha256()
-    for path in (__file__, elastic.__file__):
+    for path in (__file__, elastic.__file__, update.__file__):
         with open(path, "rb") as fh:
             digest.update(fh.read())
     return digest.hexdigest()
@@ -72,6 +72,9 @@ _SOURCE_HASH = _source_hash()
 
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
+# force rows: [G eq. 24] pair form, [V eq. 11] virtual work, and RLM [R Table 1]
+FORCE_PAIR, FORCE_VIRTUAL_WORK, FORCE_RLM = 0, 1, 2
+FORCE_FORMS = {"pair": FORCE_PAIR, "virtual_work": FORCE_VIRTUAL_WORK, "rlm": FORCE_RLM}
 HOURGLASS_FORMS = {"paper": HOURGLASS_PAPER, "variational": HOURGLASS_VARIATIONAL}
 # The variational penalty acts on the whole error vector, the paper's on its projection;
 # with this factor both stiffen the beam of [G §4.2] alike at the same alpha (compliance
@@ -80,9 +83,11 @@ VARIATIONAL_SCALE = 0.2
 
 
 @functools.lru_cache(maxsize=None)
-def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int, updated: bool = False,
+def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated: bool = False,
                    hessian: bool = False):
-    """(gradient, kinematics_stress, hessian_transpose, forces) for one scene's switches.
+    """(gradient, kinematics_stress, hessian_transpose, forces) for one body's switches:
+    dimension, material law (materials.update), force row, hourglass form, updated
+    reference, Hessian stabilisation. Each stage works on the owned rows lo..hi-1.
 
     The switches are closure constants; the stage bodies are inlined, so branches on them
     are folded away by the compiler. `gradient` and `hessian_transpose` are the extra
@@ -91,27 +96,27 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int, update
     source = _SOURCE_HASH
 
     @njit(cache=True)
-    def gradient(n, ptr, idx, g, d, f):
-        """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles 0..n-1 [V eq. 12]."""
+    def gradient(lo, hi, ptr, idx, g, d, f):
+        """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles lo..hi-1 [V eq. 12]."""
         source  # noqa: B018 - keys the disk cache to the source text
-        _gradient(dim, n, ptr, idx, g, d, f)
+        _gradient(dim, lo, hi, ptr, idx, g, d, f)
 
     @njit(cache=True)
-    def kinematics_stress(n, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, lam, mu, bulk, f, fs, F,
+    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, f, fs, F,
                           Fr, VP, J, psi, hg_psi):
-        """Stage 1 for particles 0..n-1, with each particle's strain energy density psi
+        """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi
         and (variational form) hourglass penalty hg_psi; returns the first inverted
         particle or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, dx, hgc, d,
-                           volume, youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi, hg_psi)
+        return _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, gh, dx, hgc, d,
+                           volume, youngs, c, state, f, fs, F, Fr, VP, J, psi, hg_psi)
 
     @njit(cache=True)
-    def hessian_transpose(n, ptr, idx, gh, gh_rev, VP, B):
+    def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
         """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
         [V eq. 21] feeds back into the forces."""
         source  # noqa: B018 - keys the disk cache to the source text
-        for i in range(n):
+        for i in range(lo, hi):
             for a in range(dim):
                 for b in range(dim):
                     B[i, a, b] = 0.0
@@ -122,12 +127,12 @@ def compile_stages(dim: int, model: int, pair_form: bool, hourglass: int, update
                         B[i, a, b] += VP[j, a, b] * gh_rev[p] - VP[i, a, b] * gh[p]
 
     @njit(cache=True)
-    def forces(n, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
-               f_int, f_hg):
-        """Stage 2 for particles 0..n-1: internal force f_int and, if enabled, f_hg."""
+    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
+               volume, f_int, f_hg):
+        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg."""
         source  # noqa: B018 - keys the disk cache to the source text
-        _forces(dim, pair_form, hourglass, hessian, n, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx,
-                hgc, hreg, d, fs, VP, B, youngs, f_int, f_hg)
+        _forces(dim, force_form, hourglass, hessian, lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx,
+                hgc, hreg, d, fs, VP, B, youngs, volume, f_int, f_hg)
 
     return gradient, kinematics_stress, hessian_transpose, forces
 
@@ -147,21 +152,21 @@ def _gradient_row(dim, i, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def _gradient(dim, n, ptr, idx, g, d, f):
-    for i in range(n):
+def _gradient(dim, lo, hi, ptr, idx, g, d, f):
+    for i in range(lo, hi):
         _gradient_row(dim, i, ptr, idx, g, d, f)
 
 
 @njit(cache=True, inline="always")
-def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, dx, hgc, d, volume,
-                youngs, lam, mu, bulk, f, fs, F, Fr, VP, J, psi, hg_psi):
+def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume,
+                youngs, c, state, f, fs, F, Fr, VP, J, psi, hg_psi):
     P = np.empty((dim, dim))
     S = np.empty((dim, dim))
     C = np.empty((dim, dim))
     Cinv = np.empty((dim, dim))
     err = np.empty(dim)
     first_bad = -1
-    for i in range(n):
+    for i in range(lo, hi):
         # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
         if hessian:
             for a in range(dim):
@@ -182,7 +187,7 @@ def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, 
                     for k in range(dim):
                         s += fs[i, a, k] * Fr[i, k, b]
                     F[i, a, b] = s
-        e = stress(model, F[i], dim, lam, mu, bulk, P, S, C, Cinv)
+        e = update.update(law, F[i], dim, c, state, i, P, S, C, Cinv)
         J[i] = det(F[i], dim)
         if not (math.isfinite(e) and J[i] > 0.0) and first_bad < 0:
             first_bad = i
@@ -218,17 +223,20 @@ def _kinematics(dim, model, hourglass, updated, hessian, n, ptr, idx, g, q, gh, 
 
 
 @njit(cache=True, inline="always")
-def _forces(dim, pair_form, hourglass, hessian, n, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc,
-            hreg, u, F, VP, B, youngs, f_int, f_hg):
+def _forces(dim, force_form, hourglass, hessian, lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc,
+            hreg, u, F, VP, B, youngs, volume, f_int, f_hg):
     """With Hessian stabilisation the force is the standard one for V P - B with g plus the
-    standard one for V P with q (the transpose of [V eq. 21])."""
+    standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1, sign
+    as DATA_SHEET §A] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it uses
+    particle i's correction for both terms and does not conserve linear momentum."""
+    pair_form = force_form == FORCE_PAIR
     xij = np.empty(dim)
-    for i in range(n):
+    for i in range(lo, hi):
         for a in range(dim):
             f_int[i, a] = 0.0
             if hourglass != HOURGLASS_OFF:
                 f_hg[i, a] = 0.0
-        if not pair_form:
+        if force_form == FORCE_VIRTUAL_WORK:
             for a in range(dim):
                 s = 0.0
                 for b in range(dim):
@@ -239,18 +247,26 @@ def _forces(dim, pair_form, hourglass, hessian, n, ptr, idx, g, g_rev, g_sum, q,
                 f_int[i, a] = s
         for p in range(ptr[i], ptr[i + 1]):
             j = idx[p]
-            for a in range(dim):
-                s = 0.0
-                for b in range(dim):
-                    if hessian:
-                        s -= (VP[j, a, b] - B[j, a, b]) * g_rev[p, b] + VP[j, a, b] * q_rev[p, b]
-                        if pair_form:
-                            s += (VP[i, a, b] - B[i, a, b]) * g[p, b] + VP[i, a, b] * q[p, b]
-                    else:
-                        s -= VP[j, a, b] * g_rev[p, b]
-                        if pair_form:
-                            s += VP[i, a, b] * g[p, b]
-                f_int[i, a] += s
+            if force_form == FORCE_RLM:
+                ratio = volume[i] / volume[j]
+                for a in range(dim):
+                    s = 0.0
+                    for b in range(dim):
+                        s += (VP[i, a, b] + ratio * VP[j, a, b]) * g[p, b]
+                    f_int[i, a] += s
+            else:
+                for a in range(dim):
+                    s = 0.0
+                    for b in range(dim):
+                        if hessian:
+                            s -= (VP[j, a, b] - B[j, a, b]) * g_rev[p, b] + VP[j, a, b] * q_rev[p, b]
+                            if pair_form:
+                                s += (VP[i, a, b] - B[i, a, b]) * g[p, b] + VP[i, a, b] * q[p, b]
+                        else:
+                            s -= VP[j, a, b] * g_rev[p, b]
+                            if pair_form:
+                                s += VP[i, a, b] * g[p, b]
+                    f_int[i, a] += s
             if hourglass == HOURGLASS_PAPER:
                 # [G eq. 27, 32]: errors projected on the current separation, central force
                 r2 = 0.0
@@ -365,9 +381,9 @@ def principal_stretches(F, dim):
 
 
 @njit(cache=True)
-def stable_time_step(n, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, model, dim):
+def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, law, dim):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
-    owned particles:
+    owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
     the motion from the reference fs (the current spacing shrinks with it), and c_i the
@@ -377,18 +393,15 @@ def stable_time_step(n, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, mode
     Hessian stabilisation (formulations.reference). The strain max |ln s| over the
     principal stretches of fs is the distortion measure of the adaptive reference update.
     In the total-Lagrangian formulation fs and F are the same array. Also returns the first
-    particle with the smallest step (-1 if n = 0); the first flattened or inverted particle
-    i gives (0, inf, i)."""
+    particle with the smallest step (-1 if there is none); the first flattened or inverted
+    particle i gives (0, inf, i)."""
     dt = np.inf
     worst = 0.0
     smallest = -1
-    for i in range(n):
+    for i in range(lo, hi):
         s_min, s_max = principal_stretches(F[i], dim)
         f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim)
-        if model == SAINT_VENANT_KIRCHHOFF:
-            stiffening = max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
-        else:
-            stiffening = max(1.0, 1.0 - math.log(J[i])) if J[i] > 0 else np.inf
+        stiffening = update.stiffening(law, s_max, J[i])
         length = min_spacing[i] * min(1.0, f_min)
         if not (length > 0.0 and stiffening < np.inf):
             return 0.0, np.inf, i  # no stable step

@@ -145,6 +145,8 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
                     attrs["totals"] = json.dumps(state["totals"])
                     attrs["schedules"] = json.dumps(schedules)
                     attrs["particles"] = sim.decomp.total
+                    if len(sim.offsets) > 2:  # the first global id of each body
+                        attrs["bodies"] = json.dumps(sim.offsets.tolist())
         try:
             digest = file_digest(tmp, comm)
         except ValueError as exc:
@@ -199,6 +201,7 @@ def _read_block(path: str, comm) -> dict:
             if field not in f or len(f[field]) != total:
                 raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
             fields[field] = f[field][start:stop]
+        attrs["bodies"] = f.attrs.get("bodies", "null")
     return {"attrs": attrs, "fields": fields}
 
 
@@ -221,7 +224,7 @@ def read(path: str, comm) -> dict:
     _collective_check(comm, read_block)
     attrs = block[0]["attrs"]
     data = {"path": path, "fields": block[0]["fields"], "scene": json.loads(attrs["scene"]),
-            "group_names": json.loads(attrs["groups"])}
+            "group_names": json.loads(attrs["groups"]), "offsets": json.loads(attrs["bodies"])}
     for key in ("clock", "totals", "schedules"):
         data[key] = json.loads(attrs[key])
     return data

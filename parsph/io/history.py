@@ -29,6 +29,8 @@ def units_of(name: str, probe_units: dict) -> str:
         return UNITS[name]
     if name in probe_units:
         return probe_units[name]
+    if name.split(".")[0] in UNITS:  # a body's energy, NAME.BODY
+        return UNITS[name.split(".")[0]]
     return next((u for pattern, u in PATTERNS if re.fullmatch(pattern, name)), "")
 
 

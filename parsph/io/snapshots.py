@@ -15,6 +15,7 @@ import os
 import h5py
 import numpy as np
 
+from parsph import quantities
 from parsph.errors import InputError
 from parsph.io.h5 import ParticleFile
 from parsph.parallel.runtime import collective
@@ -22,19 +23,6 @@ from parsph.parallel.runtime import collective
 HEADER = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0">\n<Domain>\n'
           '<Grid Name="particles" GridType="Collection" CollectionType="Temporal">\n')
 FOOTER = "</Grid>\n</Domain>\n</Xdmf>\n"
-
-
-def field_bytes(name: str, dim: int) -> int:
-    """Bytes per particle of snapshot field `name` (sim.quantity's shapes)."""
-    if name == "rank":
-        return 4
-    if name in ("position", "reference_position"):
-        return 24
-    if name == "cauchy_stress":
-        return 8 * dim * dim
-    if name in ("displacement", "velocity", "reaction", "force"):
-        return 8 * dim
-    return 8
 
 
 def check_snapshots_readable(path: str) -> None:
@@ -88,7 +76,7 @@ class SnapshotWriter:
 
     def estimate_bytes(self, sim, fields: list) -> int:
         """Bytes one snapshot of `fields` adds to the file (data and HDF5 metadata)."""
-        per_particle = sum(field_bytes(name, sim.dim) for name in fields) + 8
+        per_particle = sum(quantities.bytes_per_point(name, sim.dim) for name in fields) + 8
         first = 0 if self.times else 8 * sim.decomp.total  # the connectivity
         return sim.decomp.total * per_particle + first + 1024 * (len(fields) + 2)
 

@@ -93,9 +93,11 @@ def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
 
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
-    pairs: Pairs, kernel: str,
+    pairs: Pairs, kernel: str, corrected: np.ndarray | None = None,
 ) -> ReferencePairs:
-    """Kernel values and corrected gradients for every row of `pairs` in `positions`."""
+    """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
+    with `corrected` False get the plain SPH gradient g_ij = -V_j w_ij = V_j grad_i W_ij
+    (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i."""
     dim = positions.shape[1]
     rows = pairs.rows
     row = pairs.row_of_pair()
@@ -112,6 +114,9 @@ def reference_pairs(
     counts = pairs.counts()
     condition = np.full(rows, np.inf)
     ok = counts > 0
+    if corrected is not None:
+        ok &= corrected
+        condition[~corrected] = 1.0
     if ok.any():
         condition[ok] = np.linalg.cond(L[ok])
     bad = ~(condition < MAX_CONDITION)
@@ -124,6 +129,8 @@ def reference_pairs(
             f"{int(bad.sum())} particle(s) affected. Increase kernel.support or kernel.neighbours, "
             "or check for isolated or collinear particles."
         )
+    if corrected is not None:
+        L[~corrected] = -np.eye(dim)
     Linv = np.linalg.inv(L) if rows else L
     g = np.empty_like(dx)
     g_sum = np.empty((rows, dim))

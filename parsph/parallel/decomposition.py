@@ -152,6 +152,7 @@ class LocalBody:
     n_ghost: int  # layer-1 ghosts
     total: int  # particles over all ranks
     fields: dict
+    offsets: np.ndarray | None = None  # first global id of each body, then the total (None: one body)
 
 
 def add_ghosts(owned: dict, position: str, comm) -> LocalBody:

@@ -4,7 +4,7 @@ A body symmetric about axis-aligned planes is computed on one side of them only,
 punch of [V §2.4.3] is on a quarter of its domain. Every particle within two kernel
 supports of a plane gets a mirror image beyond it (and an image across two or three planes
 near their corner). Images join the neighbour search, the corrections and the sums like ghosts
-do, with reflected values, so the particles near a plane have full neighbourhoods and move
+do, with values reflected as their fields' kinds say (parsph.fields), so the particles near a plane have full neighbourhoods and move
 as those of the whole body would; no component is held fixed and no kernel is cut.
 
 Images are layered like the ghosts of parallel.decomposition: layer-1 images (neighbours
@@ -25,12 +25,10 @@ import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
+from parsph import fields as registry
 from parsph.errors import InputError, ParsphError
 from parsph.parallel.decomposition import LocalBody
 
-POSITIONS = ("X", "Xr")  # per-particle fields reflected as points
-VECTORS = ("u", "v")  # reflected as vectors
-TENSORS = ("Fr",)  # reflected on both indices; every other field is copied
 
 
 @dataclass
@@ -123,13 +121,7 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
         out = {}
         for key, arr in fields.items():
             value = arr[source[which]]
-            if key == "gid":
-                value = gid[which]
-            elif key in POSITIONS:
-                value = sign[which] * value + offset[which]
-            elif key in VECTORS or key in TENSORS:
-                value = reflect(value, sign[which])
-            out[key] = value
+            out[key] = gid[which] if key == "gid" else registry.get(key).reflect(value, sign[which], offset[which])
         return out
 
     first, second = images(layer1), images(layer2)

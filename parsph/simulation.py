@@ -1,17 +1,20 @@
-"""`Simulation`: the particle state of one rank and the explicit time step.
+"""`Simulation`: the loop. One rank's particles of every body, the explicit time step,
+the bodies' formulation stages, topology and halo, energy bookkeeping and read-outs.
 
 A step is velocity-Verlet (kick-drift-kick leap-frog):
     v += dt/2 a;  constrained v;  u += dt v;  constrained u;  t += dt
-    halo(d) -> [gradient -> halo(f)] -> kinematics + stress -> halo(V P, f^s)
-        -> [hessian_transpose -> halo(B)] -> forces -> a = f/m + b
+    the formulations' stages (formulations.nodal), phase by phase over the bodies, with
+        the ghost refreshes derived from what each stage reads and writes -> a = f/m + b
     v += dt/2 a;  constrained v
     [updated reference: if an update is due, X^r = x, F^r = F, V^r = J V^0, new owners,
      migration, ghosts, neighbours and corrections in X^r, forces again]
-Bracketed stages run only with Hessian stabilisation or the updated formulation. Local
-arrays hold the rank's owned particles first, then its ghosts. Only the stages a scene
-uses are compiled and run (formulations.tlsph). Sums over particles (energies, the work
-accumulated step by step, obstacle forces) are exact (exact_sum), so that the history, like
-the particle state, is the same bit for bit on any number of ranks.
+The scene's bodies share one particle set (global ids numbered body after body, so each
+body's owned particles are a contiguous run of rows); each body has its material law and
+formulation, and particles of different bodies are not neighbours. Which arrays a particle
+carries, migrates, checkpoints and mirrors comes from the field registry (parsph.fields).
+Local arrays hold the rank's owned particles first, then its ghosts. Sums over particles
+(energies, the work accumulated step by step, obstacle forces) are exact (exact_sum), so
+that the history, like the particle state, is the same bit for bit on any number of ranks.
 """
 
 from __future__ import annotations
@@ -23,23 +26,42 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from parsph import config
+from parsph import config, fields, materials
 from parsph.bc import BoundaryConditions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, total
 from parsph.formulations import reference, tlsph
-from parsph.materials.elastic import MODEL_IDS, first_piola_stresses
+from parsph.formulations.nodal import NodalFormulation
+from parsph.materials.elastic import first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.walls import Walls
 
-REFERENCE_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
+BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
+UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
+TOTALS = ("hourglass_work",  # absorbed by the "paper" hourglass forces
+          "hourglass_released",  # penalty dropped at reference updates
+          "external_work")
+
+
+class Body:
+    """One body of the scene: its particles' global ids first..last-1, its material law and
+    constants, its formulation; lo..hi-1 are its owned rows on this rank."""
+
+    def __init__(self, index: int, spec: dict, first: int, last: int, dim: int):
+        self.index, self.name = index, spec["name"]
+        self.first, self.last = first, last
+        self.law = materials.LAWS[spec["material"]["model"]]
+        self.constants = materials.constants(spec["material"])
+        self.formulation = NodalFormulation(spec["formulation"], dim, self.law.law_id)
+        self.lo = self.hi = 0
+        self.stages = []
 
 
 class Simulation:
-    """Lagrangian corrected SPH state and stepping for the particles this rank owns."""
+    """The particles this rank owns, of every body, and the loop that steps them."""
 
     def __init__(self, scene: dict, local: LocalBody, comm, restart: dict | None = None):
         """Set up this rank's particles `local` (build.build_local, or a checkpoint's block
@@ -47,22 +69,21 @@ class Simulation:
         self.scene = scene
         self.comm = comm
         self.dim = dim = scene["scene"]["dimension"]
-        self.constants = config.material_constants(scene["material"])
-        self.model = MODEL_IDS[scene["material"]["model"]]
-        form = scene["formulation"]
-        self.alpha = form["hourglass"]
-        self.hourglass = self.alpha > 0.0
-        self.hourglass_form = tlsph.HOURGLASS_FORMS[form["hourglass_form"]] if self.hourglass else 0
-        self.pair_form = form["force_form"] == "pair"
-        self.updated = form["type"] == "ulsph"
-        self.eta = form["hessian"]
-        self.weighted_hessian = form["hessian_correction"] == "weighted"
-        self.update_every, self.update_strain = form["update_every"], form["update_strain"]
+        specs = config.bodies(scene)
+        offsets = local.offsets if local.offsets is not None else np.array([0, local.total])
+        self.offsets = np.asarray(offsets, np.int64)
+        self.bodies = [Body(b, spec, int(self.offsets[b]), int(self.offsets[b + 1]), dim)
+                       for b, spec in enumerate(specs)]
+        forms = [b.formulation for b in self.bodies]
+        self.updated = any(f.updated for f in forms)  # one body only (config)
+        self.eta = max(f.eta for f in forms)
+        self.hourglass = any(f.hourglass_form for f in forms)
+        self.hourglass_form = forms[0].hourglass_form if len(forms) == 1 else -1
+        self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
+        owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
+        self.carried = fields.carried(owners)  # the registered fields the particles carry
         self.rebalance = scene["parallel"]["rebalance"]
         self.group_names = sorted(scene["groups"])
-        self._gradient, self._kinematics_stress, self._hessian_transpose, self._forces = \
-            tlsph.compile_stages(dim, self.model, self.pair_form, self.hourglass_form, self.updated,
-                                 self.eta > 0)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
         body_acc = scene["loads"]["body_acceleration"]
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
@@ -71,10 +92,8 @@ class Simulation:
         self.step_count = 0
         self.updates = 0  # reference updates so far
         self.since_update = 0  # steps since the last one
-        # running totals of the work done on this rank's particles, exact (exact_sum)
-        self.totals = {"hourglass_work": Accumulator(),  # absorbed by the "paper" hourglass forces
-                       "hourglass_released": Accumulator(),  # penalty dropped at reference updates
-                       "external_work": Accumulator()}
+        # running totals of the work done on this rank's particles of each body, exact (exact_sum)
+        self.totals = {name: [Accumulator() for _ in self.bodies] for name in TOTALS}
         self.walls = Walls(scene["walls"], scene["tools"], dim)
         self._adopt(local)
         n = self.n_owned
@@ -87,8 +106,10 @@ class Simulation:
             self.t, self.step_count = clock["t"], clock["step"]
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
-                for name, acc in self.totals.items():
-                    acc.set([Exact.from_json(totals[name])])
+                for name, accs in self.totals.items():
+                    saved = totals[name] if len(accs) > 1 else [totals[name]]
+                    for acc, value in zip(accs, saved):
+                        acc.set([Exact.from_json(value)])
                 self.walls.restore(totals["wall_force"])
         self._cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up, for messages
         self.compute_forces()
@@ -101,27 +122,34 @@ class Simulation:
     def _adopt(self, local: LocalBody) -> None:
         """Take `local` (owned particles with two ghost layers and all their arrays) as this
         rank's particles: mirror images across symmetry planes (parallel.mirrors), halo plan,
-        reference data in the reference configuration (X, or X^r when updated), state and
-        work arrays for owned particles and layer-1 ghosts."""
+        reference data in the reference configuration (X, or X^r when updated), the carried
+        fields (parsph.fields) and work arrays for owned particles and layer-1 ghosts."""
         updated = self.updated and "Xr" in local.fields
         ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
         with collective(self.comm):
             local, mirrors = add_images(local, ref[0], self.scene["symmetry"], self.comm)
             fl, n, dim = local.fields, local.n_owned, self.dim
             self.decomp = Decomposition(local, self.comm, mirrors)
+            body = np.searchsorted(self.offsets, local.gid % local.total, side="right") - 1
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
-                self.scene["kernel"]["type"], self.hourglass_form, self.alpha, self.eta,
-                self.weighted_hessian)
+                self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
+                self.eta, self.bodies[0].formulation.weighted_hessian)
         self.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
         keep = self.decomp.n_rows
         self.n_owned = n
         self.gid = local.gid[:keep]
+        self.body = body[:keep]
+        for b in self.bodies:
+            b.lo, b.hi = (int(k) for k in np.searchsorted(self.gid[:n], [b.first, b.last]))
         self.X, self.mass, self.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
         self.measure, self.support = fl["measure"][:keep], fl["support"][:keep]
         self.groups = {name: fl["groups"][:n, k].astype(bool) for k, name in enumerate(self.group_names)}
         self.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
         self.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
+        # fields registered beyond the base and the updated reference: carried as declared
+        self.extra = {name: self._initial(name, fl, keep) for name in self.carried
+                      if name not in BASE_FIELDS and name not in UPDATED_STATE}
         self.F = np.zeros((keep, dim, dim))
         self.d, self.fs = self.u, self.F  # total-Lagrangian: the reference is X, F^r = I
         if self.updated:
@@ -138,13 +166,27 @@ class Simulation:
         self.VP = np.zeros((keep, dim, dim))
         self.J = np.ones(keep)
         self.psi = np.zeros(keep)
+        self.no_state = np.zeros((keep, 0))  # the hyperelastic laws carry no per-point state
         self.f_int = np.zeros((n, dim))
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
-        self.hg_psi = np.zeros(n if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL else 0)
-        self.youngs = np.full(keep, self.constants.youngs)
+        variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
+        self.hg_psi = np.zeros(n if variational else 0)
+        self.youngs = np.array([b.constants.youngs for b in self.bodies])[self.body]
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
+        for b in self.bodies:
+            b.stages = b.formulation.stages(self, b)
+
+    def _initial(self, name: str, fl: dict, keep: int) -> np.ndarray:
+        """A registered field's values on the local rows: as carried in `fl` (migrated,
+        read from a checkpoint), else its declared initial values, else zeros."""
+        if name in fl:
+            return fl[name][:keep].copy()
+        field = fields.get(name)
+        if field.initial is not None:
+            return np.asarray(field.initial(fl["X"][:keep], self.gid), np.float64).copy()
+        return np.zeros((keep,) + field.shape(self.dim))
 
     def _hourglass_frequencies(self) -> np.ndarray:
         """omega_hg^2 = 2 sum_j c_ij (E_i + E_j) / m_i: a Gershgorin bound on the stiffness of
@@ -171,9 +213,16 @@ class Simulation:
         """(stable step, largest incremental log strain) over all ranks, from
         formulations.tlsph.stable_time_step (collective). A step of zero raises the error
         naming the particle with the smallest step on any rank."""
-        dt, strain, smallest = tlsph.stable_time_step(
-            self.n_owned, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
-            self._omega_hg2, self.constants.wave_speed, self.model, self.dim)
+        dt, strain, smallest = np.inf, 0.0, -1
+        for b in self.bodies:  # in row order: the first particle with the smallest step
+            step, worst, first = tlsph.stable_time_step(
+                b.lo, b.hi, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
+                self._omega_hg2, b.constants.wave_speed, b.law.law_id, self.dim)
+            strain = max(strain, worst)
+            if step < dt or (first >= 0 and not step > 0.0):
+                dt, smallest = step, first
+            if not step > 0.0:
+                break
         reduced = np.array([-dt, strain])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
@@ -201,51 +250,40 @@ class Simulation:
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self) -> None:
-        """Stages of the force evaluation at the current u; sets self.acc (owned)."""
-        n, ref = self.n_owned, self.ref
-        lam, mu, bulk = self.constants.lam, self.constants.mu, self.constants.bulk
+        """The bodies' stages at the current u, phase by phase; before each phase the ghost
+        values of the fields it reads at neighbours that are stale are refreshed (the
+        displacement always: the integrator moved it). Sets self.force and self.acc (owned)."""
+        n = self.n_owned
         clock = time.perf_counter
-        stages = self.stage_seconds
-        t0 = clock()
-        if self.updated:
-            np.subtract(self.u[:n], self.shift[:n], out=self.d[:n])
-        self.decomp.refresh(self.d)
-        t1 = clock()
-        stages["halo"] += t1 - t0
-        if self.eta > 0:
-            self._gradient(n, ref.ptr, ref.idx, ref.g, self.d, self.f)
-            t2 = clock()
-            stages["kinematics+stress"] += t2 - t1
-            self.decomp.refresh(self.f)
-            t1 = clock()
-            stages["halo"] += t1 - t2
-        bad = self._kinematics_stress(
-            n, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, self.d, self.volume, self.youngs,
-            lam, mu, bulk, self.f, self.fs, self.F, self.Fr if self.updated else self.F, self.VP, self.J,
-            self.psi, self.hg_psi)
-        t2 = clock()
-        stages["kinematics+stress"] += t2 - t1
-        if bad >= 0:
-            x = self.X[bad] + self.u[bad]
-            where = ", ".join(f"{c:.6g}" for c in x)
-            raise ParsphError(
-                f"particle {int(self.gid[bad])} at ({where}) is inverted or its stress is not finite "
-                f"(J = {self.J[bad]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
-                f"unstable: {self._advice()}")
-        self.decomp.refresh(self.VP, *((self.fs,) if self.hourglass else ()))
-        if self.eta > 0:
-            self._hessian_transpose(n, ref.ptr, ref.idx, ref.gh, ref.gh_rev, self.VP, self.B)
-            self.decomp.refresh(self.B)
-        t3 = clock()
-        stages["halo"] += t3 - t2
-        self._forces(n, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev, ref.q_sum, ref.dx,
-                     ref.hgc, ref.hreg, self.d, self.fs, self.VP, self.B, self.youngs, self.f_int, self.f_hg)
-        stages["forces+hourglass" if self.hourglass else "forces"] += clock() - t3
+        seconds = self.stage_seconds
+        stale = {"d"}
+        phases = max(len(b.stages) for b in self.bodies)
+        for k in range(phases):
+            phase = [b.stages[k] for b in self.bodies if k < len(b.stages)]
+            reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
+            if reads:
+                t0 = clock()
+                self.decomp.refresh(*(getattr(self, name) for name in reads))
+                stale.difference_update(reads)
+                seconds["halo"] += clock() - t0
+            for stage in phase:
+                t0 = clock()
+                stage.run()
+                seconds[stage.name] += clock() - t0
+                stale.update(stage.writes)
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
         self.force = force
         self.acc = force / self.mass[:n, None]
+
+    def unstable_particle(self, i: int) -> ParsphError:
+        """The error for owned particle i, inverted or with a stress that is not finite."""
+        where = ", ".join(f"{c:.6g}" for c in self.X[i] + self.u[i])
+        return ParsphError(
+            f"particle {int(self.gid[i])} at ({where}) is inverted or its stress is not finite "
+            f"(J = {self.J[i]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
+            f"unstable: {self._advice()}")
 
     def external_force(self) -> np.ndarray:
         """Body force plus constraint reactions on the owned particles."""
@@ -293,11 +331,15 @@ class Simulation:
         self._kick(0.5 * dt)
         self.bcs.set_velocity(self.v[:n], self.t)
         du = self.u[:n] - u_old
-        if self.hourglass_form == tlsph.HOURGLASS_PAPER:
-            # not a potential force: its energy is the work it has absorbed
-            self.totals["hourglass_work"].add(-0.5 * (f_hg_old + self.f_hg) * du)
+        paper = [b for b in self.bodies if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER]
+        if paper:  # not a potential force: its energy is the work it has absorbed
+            work = -0.5 * (f_hg_old + self.f_hg) * du
+            for b in paper:
+                self.totals["hourglass_work"][b.index].add(work[b.lo:b.hi])
         self._external = self.external_force()
-        self.totals["external_work"].add(0.5 * (f_ext_old + self._external) * du)
+        work = 0.5 * (f_ext_old + self._external) * du
+        for b in self.bodies:
+            self.totals["external_work"][b.index].add(work[b.lo:b.hi])
         self.step_count += 1
         self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
@@ -316,9 +358,10 @@ class Simulation:
         in X^r, rebuild the corrections and evaluate the forces in the new reference."""
         start = time.perf_counter()
         n = self.n_owned
-        owned = dict(self._owned_fields(), gid=self.gid[:n], Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
+        owned = dict(self._owned_fields(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
-        self.totals["hourglass_released"].add(self.hg_psi)  # the penalty restarts at 0
+        for b in self.bodies:  # the penalty restarts at 0
+            self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         if self.comm.size > 1:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
@@ -340,14 +383,19 @@ class Simulation:
         self.updates += 1
         self.since_update = 0
 
-    def _owned_fields(self) -> dict:
-        """The owned particles' reference data and state, as migrated and checkpointed."""
+    def field_values(self, name: str) -> np.ndarray:
+        """The owned particles' values of the carried field `name` (parsph.fields)."""
         n = self.n_owned
-        groups = (np.stack([self.groups[k] for k in self.group_names], axis=1).astype(np.uint8)
-                  if self.group_names else np.zeros((n, 0), np.uint8))
-        return {"X": self.X[:n], "measure": self.measure[:n], "volume": self.volume[:n],
-                "mass": self.mass[:n], "support": self.support[:n], "groups": groups,
-                "u": self.u[:n], "v": self.v[:n]}
+        if name == "groups":
+            return (np.stack([self.groups[k] for k in self.group_names], axis=1).astype(np.uint8)
+                    if self.group_names else np.zeros((n, 0), np.uint8))
+        if name in self.extra:
+            return self.extra[name][:n]
+        return getattr(self, name)[:n]
+
+    def _owned_fields(self) -> dict:
+        """The owned particles' carried fields that migrate with them (with "gid")."""
+        return {name: self.field_values(name) for name in fields.migrating(self.carried)}
 
     @property
     def dt(self) -> float:
@@ -358,15 +406,14 @@ class Simulation:
         """Everything io.checkpoint stores (collective: totals): per-particle arrays of the
         owned particles (with the updated reference, if any); the accumulated totals over all
         ranks, exact (exact_sum.Exact.to_json), and the last step's obstacle forces."""
-        n = self.n_owned
-        totals = allsum(self.comm, [acc.sums()[0] for acc in self.totals.values()])
-        fields = self._owned_fields()
-        if self.updated:
-            fields.update({k: getattr(self, k)[:n] for k in REFERENCE_STATE})
+        sums = allsum(self.comm, [acc.sums()[0] for accs in self.totals.values() for acc in accs])
+        per_body = [sums[k: k + len(self.bodies)] for k in range(0, len(sums), len(self.bodies))]
+        totals = {name: [s.to_json() for s in values] if len(values) > 1 else values[0].to_json()
+                  for name, values in zip(self.totals, per_body)}
+        stored = [name for name in fields.checkpointed(self.carried) if name != "gid"]
         return {
-            "fields": fields, "group_names": self.group_names,
-            "totals": {**{name: s.to_json() for name, s in zip(self.totals, totals)},
-                       "wall_force": self.wall_forces().tolist()},
+            "fields": {name: self.field_values(name) for name in stored}, "group_names": self.group_names,
+            "totals": {**totals, "wall_force": self.wall_forces().tolist()},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
                       "since_update": self.since_update},
         }
@@ -397,6 +444,8 @@ class Simulation:
             return self.disorder()[sel]
         if name == "spacing_ratio":
             return self.spacing_ratio()[sel]
+        if name in self.extra:
+            return self.extra[name][sel]
         raise ValueError(name)
 
     def disorder(self) -> np.ndarray:
@@ -419,8 +468,13 @@ class Simulation:
         """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law alone."""
         F = np.ascontiguousarray(self.F[sel])
         P = np.empty_like(F)
-        c = self.constants
-        first_piola_stresses(self.model, F, self.dim, c.lam, c.mu, c.bulk, P)
+        body = self.body[sel]
+        for b in self.bodies:
+            rows = slice(None) if len(self.bodies) == 1 else np.flatnonzero(body == b.index)
+            part = np.empty_like(F[rows])
+            c = b.constants
+            first_piola_stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, c.lam, c.mu, c.bulk, part)
+            P[rows] = part
         return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
 
     def von_mises(self, sel: np.ndarray) -> np.ndarray:
@@ -432,24 +486,29 @@ class Simulation:
         return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
 
     def energy_sums(self) -> dict:
-        """This rank's parts of the energies, exact: strain (sum V^0 psi of the owned
-        particles), hourglass (their penalty, or the work absorbed on this rank by the paper
-        form, plus the penalty released at reference updates) and external work."""
-        n = self.n_owned
-        acc = {name: a.sums()[0] for name, a in self.totals.items()}
-        return {"strain": total(self.volume[:n] * self.psi[:n]),
-                "hourglass": total(self.hg_psi) + acc["hourglass_work"] + acc["hourglass_released"],
-                "external": acc["external_work"]}
+        """This rank's parts of the energies of each body, exact: strain (sum V^0 psi of the
+        owned particles), hourglass (their penalty, or the work absorbed on this rank by the
+        paper form, plus the penalty released at reference updates) and external work."""
+        out = {"strain": [], "hourglass": [], "external": []}
+        for b in self.bodies:
+            lo, hi = b.lo, b.hi
+            acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
+            out["strain"].append(total(self.volume[lo:hi] * self.psi[lo:hi]))
+            out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
+            out["external"].append(acc["external_work"])
+        return out
 
     @property
     def strain_energy_local(self) -> float:
         """This rank's strain energy (energy_sums)."""
-        return float(self.energy_sums()["strain"])
+        parts = self.energy_sums()["strain"]
+        return float(sum(parts[1:], parts[0]))
 
     @property
     def hourglass_energy_local(self) -> float:
         """This rank's hourglass energy (energy_sums)."""
-        return float(self.energy_sums()["hourglass"])
+        parts = self.energy_sums()["hourglass"]
+        return float(sum(parts[1:], parts[0]))
 
     def wall_forces(self) -> np.ndarray:
         """Each wall's and tool's force on the body in the last step, (obstacles, dim), exact

@@ -1,0 +1,98 @@
+"""Particle methods with a Lagrangian kernel and nodal integration, behind one interface:
+
+  tlsph  corrected SPH, total-Lagrangian [G §2]: F_i = I + sum_j (u_j - u_i) (x) g_ij with
+         the corrected gradient g_ij = V_j L_i^-1 w_ij, pair-form [G eq. 24] or
+         virtual-work [V eq. 11] forces, hourglass control [G eq. 25-32]
+  ulsph  the same from an updated reference X^r [V §3.1], optionally stabilised by
+         Hessian's difference [V eq. 17, 21]
+  sph    symmetrised SPH [R eq. 21-25, 57, Table 1]: the plain kernel gradient
+         g_ij = V_j grad_i W_ij, forces f_i = V_i sum_j (P_i + P_j) g_ij (momentum-conserving)
+  rlm    Randles-Libersky normalisation [R eq. 33-34, Table 1]: the corrected gradient in
+         F and in the force row f_i = V_i sum_j (P_i + P_j) g_ij (DATA_SHEET §A: the printed
+         sign corrected; not momentum-conserving)
+
+All four evaluate F and the stress at the particles (formulations.tlsph holds the compiled
+kernels); `stages` lists the passes of one force evaluation with what each reads and writes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsph.fields import Field, register
+from parsph.formulations import tlsph
+from parsph.formulations.base import Stage
+from parsph.formulations.reference import PairOptions
+
+TYPES = ("tlsph", "ulsph", "sph", "rlm")
+
+# the updated reference [V §3.1], carried when a body uses the updated formulation
+UPDATED_FIELDS = (
+    Field("Xr", "point", owner="ulsph", doc="reference position X^r of the updated reference [m]"),
+    Field("Fr", "tensor", owner="ulsph", doc="deformation gradient of the updated reference"),
+    Field("measure_r", "scalar", owner="ulsph", doc="measure in the updated reference"),
+    Field("volume_r", "scalar", owner="ulsph", doc="volume in the updated reference [m^3]"),
+)
+register(*UPDATED_FIELDS)
+
+
+class NodalFormulation:
+    """One body's formulation: its options and compiled stages."""
+
+    def __init__(self, options: dict, dim: int, law: int):
+        self.type = options["type"]
+        self.updated = self.type == "ulsph"
+        self.alpha = options["hourglass"]
+        self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
+        self.eta = options["hessian"]
+        self.weighted_hessian = options["hessian_correction"] == "weighted"
+        self.update_every, self.update_strain = options["update_every"], options["update_strain"]
+        force = "rlm" if self.type == "rlm" else options["force_form"]
+        self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
+            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, self.updated, self.eta > 0)
+
+    @property
+    def pair_options(self) -> PairOptions:
+        return PairOptions(corrected=self.type != "sph", hourglass_form=self.hourglass_form, alpha=self.alpha)
+
+    def stages(self, sim, body) -> list:
+        """The passes of one force evaluation over `body`'s owned particles of `sim`."""
+        hessian, hourglass = self.eta > 0, self.hourglass_form > 0
+        out = []
+        if self.updated:
+            def displacement():
+                lo, hi = body.lo, body.hi
+                np.subtract(sim.u[lo:hi], sim.shift[lo:hi], out=sim.d[lo:hi])
+            out.append(Stage("kinematics+stress", displacement, writes=("d",)))
+        if hessian:
+            def gradient():
+                ref = sim.ref
+                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, sim.d, sim.f)
+            out.append(Stage("kinematics+stress", gradient, reads=("d",), writes=("f",)))
+
+        def kinematics_stress():
+            ref = sim.ref
+            bad = self.kinematics_stress(
+                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
+                sim.youngs, body.constants.values, sim.no_state, sim.f, sim.fs, sim.F,
+                sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi)
+            if bad >= 0:
+                raise sim.unstable_particle(bad)
+        out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
+                         writes=("fs", "F", "VP", "J", "psi", "hg_psi")))
+        if hessian:
+            def hessian_transpose():
+                ref = sim.ref
+                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.VP, sim.B)
+            out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",)))
+
+        def forces():
+            ref = sim.ref
+            self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
+                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, sim.fs, sim.VP, sim.B, sim.youngs,
+                        sim.volume, sim.f_int, sim.f_hg)
+        reads = ("VP",) + (("fs",) if hourglass else ()) + (("B",) if hessian else ())
+        out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
+                         writes=("f_int", "f_hg")))
+        return out
+

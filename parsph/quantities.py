@@ -1,0 +1,67 @@
+"""Output quantities: what snapshots and probes can show, with shapes and units, declared
+once. Snapshot field validation, probe units, snapshot sizes and the XDMF attribute kinds
+derive from this registry.
+
+Most quantities are computed from the state (`Simulation.quantity`); every registered field
+(parsph.fields) that declares units is a quantity too, under its own name, read directly
+from the point set.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from parsph import fields
+
+
+@dataclass(frozen=True)
+class Quantity:
+    name: str
+    kind: str  # "scalar" | "vector" | "tensor" | "point" | "rank"
+    units: str
+    probe: bool = True  # probes may reduce it over a group
+    doc: str = ""
+
+
+_BUILT_IN = (
+    Quantity("displacement", "vector", "m"),
+    Quantity("velocity", "vector", "m/s"),
+    Quantity("position", "point", "m"),
+    Quantity("reaction", "vector", "N", doc="force the constraints exert"),
+    Quantity("force", "vector", "N", doc="internal, hourglass and body force"),
+    Quantity("J", "scalar", "1", doc="volume ratio det F"),
+    Quantity("von_mises", "scalar", "Pa"),
+    Quantity("disorder", "scalar", "1", doc="hourglass error [G eq. 26]"),
+    Quantity("spacing_ratio", "scalar", "1", doc="nearest current neighbour against the smooth spacing"),
+    Quantity("rank", "rank", "1", probe=False, doc="owner rank"),
+    Quantity("reference_position", "point", "m", probe=False),
+    Quantity("cauchy_stress", "tensor", "Pa", probe=False),
+)
+BUILT_IN = {q.name: q for q in _BUILT_IN}
+
+
+def registry() -> dict:
+    """Every quantity by name: the built-in ones, then the registered fields with units."""
+    out = dict(BUILT_IN)
+    for f in fields.REGISTRY.values():
+        if f.units is not None and f.name not in out:
+            out[f.name] = Quantity(f.name, f.kind, f.units, probe=f.kind in ("scalar", "vector"), doc=f.doc)
+    return out
+
+
+def snapshot_names() -> tuple:
+    return tuple(registry())
+
+
+def probe_names() -> tuple:
+    return tuple(name for name, q in registry().items() if q.probe)
+
+
+def units(name: str) -> str:
+    return registry()[name].units
+
+
+def bytes_per_point(name: str, dim: int) -> int:
+    """Bytes one point's value takes in a snapshot (positions are padded to 3D)."""
+    kind = registry()[name].kind
+    return {"rank": 4, "point": 24, "tensor": 8 * dim * dim, "vector": 8 * dim}.get(kind, 8)
