@@ -1,0 +1,108 @@
+"""Several bodies in one scene ([[bodies]]): each with its material and formulation, no
+kernel pairs between bodies, energies per body and in total, the same on any rank count."""
+
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+
+from conftest import ROOT, RUNS
+from parsph import config
+from parsph.build import build_local
+from parsph.errors import InputError
+from parsph.simulation import Simulation
+from mpi4py import MPI
+
+
+def _raw():
+    with open(RUNS / "two_blocks.toml", "rb") as fh:
+        return tomllib.load(fh)
+
+
+def _sim(raw, steps=0):
+    scene = config.validate(raw)
+    sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
+    for _ in range(steps):
+        sim.step()
+    return sim
+
+
+def test_a_body_moves_as_it_would_alone():
+    """The steel block of two_blocks follows, bit for bit, the run of the steel block alone
+    (its step limits both runs' time step): the other body does not touch it."""
+    both = _sim(_raw(), steps=60)
+    alone_raw = _raw()
+    del alone_raw["bodies"][1], alone_raw["initial"][1], alone_raw["groups"]["right_block"]
+    alone = _sim(alone_raw, steps=60)
+    steel = both.bodies[0]
+    assert (steel.lo, steel.hi) == (0, alone.n_owned)
+    assert both.t == alone.t
+    assert np.array_equal(both.u[:alone.n_owned], alone.u[:alone.n_owned])
+    assert np.array_equal(both.v[:alone.n_owned], alone.v[:alone.n_owned])
+    d_both, d_alone = both.diagnostics(), alone.diagnostics()
+    for name in ("kinetic_energy", "strain_energy", "hourglass_energy", "total_energy"):
+        assert d_both[f"{name}.steel"] == d_alone[name]
+    # the totals are the bodies' sums
+    for name in ("kinetic_energy", "strain_energy", "total_energy"):
+        parts = d_both[f"{name}.steel"] + d_both[f"{name}.rubber"]
+        assert d_both[name] == pytest.approx(parts, rel=1e-14)
+    assert d_both["kinetic_energy.rubber"] > 0 and d_both["strain_energy.rubber"] > 0
+
+
+def test_bodies_within_a_kernel_support_are_not_neighbours():
+    raw = _raw()
+    raw["bodies"][1]["parts"][0]["lower"][0] = 0.1  # touching: one spacing between the lattices
+    raw["bodies"][1]["parts"][0]["upper"][0] = 0.2
+    sim = _sim(raw)
+    rows = np.repeat(np.arange(sim.n_owned), np.diff(sim.ref.ptr))
+    assert len(rows) and np.array_equal(sim.body[rows], sim.body[sim.ref.idx])
+    near = np.abs(sim.X[:, 0] - 0.1) < 0.01  # both bodies' particles next to the joint
+    assert set(sim.body[near]) == {0, 1}
+
+
+def test_each_body_has_its_material_and_formulation():
+    sim = _sim(_raw())
+    steel, rubber = sim.bodies
+    assert (steel.law.name, rubber.law.name) == ("saint_venant_kirchhoff", "neo_hookean")
+    assert (steel.formulation.type, rubber.formulation.type) == ("tlsph", "sph")
+    assert steel.formulation.alpha == 50.0 and rubber.formulation.alpha == 0.0
+    assert np.all(sim.youngs[sim.body == 0] == 200e9) and np.all(sim.youngs[sim.body == 1] == 0.3e9)
+    assert sim.mass[sim.body[:sim.n_owned] == 1].max() == pytest.approx(1100.0 * 0.005 ** 2)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda raw: raw.update(material={"model": "neo_hookean", "density": 1.0}), "remove the top-level [material]"),
+    (lambda raw: raw["bodies"][1].update(name="steel"), "bodies[1].name must be a distinct identifier"),
+    (lambda raw: raw["bodies"][1]["formulation"].update(type="ulsph", update_every=5),
+     "'ulsph' and formulation.hessian need a scene of one body"),
+    (lambda raw: raw["bodies"][0]["material"].pop("density"), "missing required key 'bodies[0].material.density'"),
+    (lambda raw: raw["bodies"][1]["material"].update(shear_modulus=1.0),
+     "bodies[1].material.shear_modulus does not apply"),
+    (lambda raw: raw.update(geometry={"parts": []}), "remove geometry.parts"),
+])
+def test_bad_bodies_are_refused_naming_the_key(change, message):
+    raw = copy.deepcopy(_raw())
+    change(raw)
+    with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]").replace(".", r"\.")):
+        config.validate(raw)
+
+
+@pytest.mark.mpi
+def test_two_bodies_on_one_and_two_ranks_bit_for_bit(tmp_path):
+    from conftest import parsph
+
+    outs = []
+    for ranks in (1, 2):
+        out = tmp_path / f"r{ranks}"
+        proc = parsph(["run", RUNS / "two_blocks.toml", "--out", out, "--quiet", "--set", "time.max_steps=100"],
+                      ranks=ranks)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        outs.append(out)
+    compare = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *outs],
+                             capture_output=True, text=True, cwd=ROOT)
+    assert compare.returncode == 0, compare.stdout
