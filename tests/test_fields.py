@@ -104,8 +104,9 @@ def test_a_field_declared_in_one_place_migrates_checkpoints_restarts_and_shows(t
 
 def test_the_registry_decides_what_migrates_checkpoints_and_mirrors():
     from parsph import fields
-    from parsph.formulations import nodal  # noqa: F401 - declares the updated reference's fields
+    from parsph.formulations import nodal
 
+    assert nodal.UPDATED_FIELDS  # imported: declares the updated reference's fields
     tl, ul = fields.carried({"tlsph"}), fields.carried({"ulsph"})
     assert "Xr" not in tl and {"Xr", "Fr", "measure_r", "volume_r"} <= set(ul)
     assert fields.checkpointed(ul)[:9] == ["gid", "X", "measure", "volume", "mass", "support", "groups",

@@ -9,7 +9,7 @@ Stage 1, `kinematics_stress`: for each owned particle
     optionally stabilised by Hessian's difference [V eq. 17, 21]:
     f_i^s = f_i + eta sum_j [(d_j - d_i) (x) Hc_ij h - (f_j - f_i) (g_ij . h)]
     (f of the neighbours comes from the extra pass `gradient` and a halo refresh)
-    F_i = f_i^s F^r_i,  P_i = P(F_i), psi_i                   (materials.elastic)
+    F_i = f_i^s F^r_i,  P_i = P(F_i), psi_i                   (materials.update)
 and the stored product VP_i = V^0_i P_i F^rT_i [V eq. 14] that stage 2 reads.
 
 Stage 2, `forces`: the internal force in one of two forms,
@@ -38,9 +38,11 @@ separation that F does not explain [G eq. 25-26]:
     and the hourglass stress A_i = dPhi/dF_i = sum_j c_ij E_i e^i_ij (x) X_ij, which enters
     the internal force exactly like V_i P_i. Energy (with Phi) and linear and angular
     momentum are conserved.
-`compile_stages` makes the stages for one scene's switches (dimension, material, force
-form, hourglass form, updated reference, Hessian stabilisation), captured as compile-time constants: a scene's machine code holds
-only the terms it uses. Compiled code is cached on disk per combination.
+`compile_stages` makes the stages for one body's switches (dimension, material law, force
+row, hourglass form, updated reference, Hessian stabilisation), captured as compile-time
+constants: a body's machine code holds only the terms it uses. Compiled code is cached on
+disk per combination. The same kernels serve symmetrised SPH (plain kernel gradients, pair
+form) and RLM (its own force row) of formulations.nodal.
 """
 
 from __future__ import annotations

@@ -3,9 +3,10 @@
 A body symmetric about axis-aligned planes is computed on one side of them only, as the
 punch of [V §2.4.3] is on a quarter of its domain. Every particle within two kernel
 supports of a plane gets a mirror image beyond it (and an image across two or three planes
-near their corner). Images join the neighbour search, the corrections and the sums like ghosts
-do, with values reflected as their fields' kinds say (parsph.fields), so the particles near a plane have full neighbourhoods and move
-as those of the whole body would; no component is held fixed and no kernel is cut.
+near their corner). Images join the neighbour search, the corrections and the sums like
+ghosts do, with values reflected as their fields' kinds say (parsph.fields), so the
+particles near a plane have full neighbourhoods and move as those of the whole body would;
+no component is held fixed and no kernel is cut.
 
 Images are layered like the ghosts of parallel.decomposition: layer-1 images (neighbours
 of owned particles) come after the layer-1 ghosts and are refreshed from their source
