@@ -78,7 +78,6 @@ class Simulation:
         self.updated = any(f.updated for f in forms)  # one body only (config)
         self.eta = max(f.eta for f in forms)
         self.hourglass = any(f.hourglass_form for f in forms)
-        self.hourglass_form = forms[0].hourglass_form if len(forms) == 1 else -1
         self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
         self.carried = fields.carried(owners)  # the registered fields the particles carry

@@ -49,6 +49,7 @@ def plot_history(path: str, names: list, output: str | None) -> str:
         ax.set_ylabel(f"[{unit or '-'}]")
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
+        ax.ticklabel_format(style="sci", scilimits=(-3, 4), useMathText=True)  # 2e-4, not 0.000200
     axes[-1, 0].set_xlabel("time [s]")
     output = output or os.path.splitext(path)[0] + "_" + "_".join(names)[:80] + ".png"
     fig.tight_layout()
