@@ -571,6 +571,9 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
         raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
     if form["type"] in ("sph", "rlm") and form["force_form"] != "pair":
         raise InputError(f"{path}.force_form applies to tlsph and ulsph; {form['type']} has its own force row")
+    if form["type"] in ("sph", "rlm") and form["hessian"] > 0:
+        raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
+                         f"not to {form['type']}")
     return form
 
 
