@@ -1,6 +1,6 @@
-"""Output quantities: what snapshots and probes can show, with shapes and units, declared
-once. Snapshot field validation, probe units, snapshot sizes and the XDMF attribute kinds
-derive from this registry.
+"""Output quantities: what snapshots and probes can show, with shapes and units, and the
+units of the history's series, declared once. Snapshot field validation, probe and history
+units and snapshot sizes derive from this registry.
 
 Most quantities are computed from the state (`Simulation.quantity`); every registered field
 (parsph.fields) that declares units is a quantity too, under its own name, read directly
@@ -9,6 +9,7 @@ from the point set.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from parsph import fields
@@ -65,3 +66,23 @@ def bytes_per_point(name: str, dim: int) -> int:
     """Bytes one point's value takes in a snapshot (positions are padded to 3D)."""
     kind = registry()[name].kind
     return {"rank": 4, "point": 24, "tensor": 8 * dim * dim, "vector": 8 * dim}.get(kind, 8)
+
+
+# The history's series (diagnostics.global_diagnostics, Simulation.diagnostics): units by
+# name, by pattern, and NAME.BODY for a body's energies
+HISTORY = {
+    "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
+    "strain_energy": "J", "hourglass_energy": "J", "external_work": "J", "total_energy": "J",
+    "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
+}
+HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),
+                    (r".+_force_[xyz]", "N"))
+
+
+def history_units(name: str) -> str:
+    """Units of a history series other than a probe ("" if unknown)."""
+    if name in HISTORY:
+        return HISTORY[name]
+    if name.split(".")[0] in HISTORY:  # a body's energy
+        return HISTORY[name.split(".")[0]]
+    return next((u for pattern, u in HISTORY_PATTERNS if re.fullmatch(pattern, name)), "")

@@ -115,7 +115,7 @@ class Simulation:
         self._external = self.external_force()  # at the current state, for the work integral
         if scene["time"]["dt"] > 0:
             self._cfl_at = (scene["time"]["cfl"] * self._stability()[0], self.step_count)
-        self._stable_dt = restart["clock"]["dt"] if restart else self._stable_time_step()[0]
+        self._stable_dt = restart["clock"]["dt"] if restart else self.stable_time_step()[0]
 
     # ----------------------------------------------------------------- set-up helpers
     def _adopt(self, local: LocalBody) -> None:
@@ -197,7 +197,7 @@ class Simulation:
         k = ref.hgc * (self.youngs[rows] + self.youngs[ref.idx])
         return 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
 
-    def _stable_time_step(self) -> tuple:
+    def stable_time_step(self) -> tuple:
         """(size of the next step, largest incremental log strain): time.dt if fixed, else
         time.cfl times the stable step; the strain for the adaptive reference update (0
         unless it is enabled). Collective."""
@@ -343,11 +343,11 @@ class Simulation:
         self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))
-        self._stable_dt, strain = self._stable_time_step()
+        self._stable_dt, strain = self.stable_time_step()
         if self.updated and ((self.update_every and self.since_update >= self.update_every)
                              or (self.update_strain and strain > self.update_strain)):
             self.update_reference()
-            self._stable_dt = self._stable_time_step()[0]
+            self._stable_dt = self.stable_time_step()[0]
         return dt
 
     def update_reference(self) -> None:

@@ -8,30 +8,17 @@ every series carries its units as the attribute `units`.
 from __future__ import annotations
 
 import os
-import re
 
 import h5py
 import numpy as np
 
+from parsph import quantities
 from parsph.errors import InputError, ParsphError
-
-UNITS = {
-    "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
-    "strain_energy": "J", "hourglass_energy": "J", "external_work": "J", "total_energy": "J",
-    "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
-}
-PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"), (r".+_force_[xyz]", "N"))
 
 
 def units_of(name: str, probe_units: dict) -> str:
-    """Units of a history series: the diagnostics', a probe's, or an obstacle force's."""
-    if name in UNITS:
-        return UNITS[name]
-    if name in probe_units:
-        return probe_units[name]
-    if name.split(".")[0] in UNITS:  # a body's energy, NAME.BODY
-        return UNITS[name.split(".")[0]]
-    return next((u for pattern, u in PATTERNS if re.fullmatch(pattern, name)), "")
+    """Units of a history series: a probe's, or those quantities.history_units gives."""
+    return probe_units[name] if name in probe_units else quantities.history_units(name)
 
 
 class HistoryWriter:
