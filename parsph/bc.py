@@ -66,6 +66,8 @@ class BoundaryConditions:
                                          spec["ramp"]))
             item = self.items[-1]
             self.mask[item.rows, item.cols] = True
+        # a prescribed velocity or displacement can change the kinetic energy
+        self.moving = any(c.kind != "fixed" for c in self.items)
 
     def set_velocity(self, v: np.ndarray, t: float) -> None:
         for c in self.items:

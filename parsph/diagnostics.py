@@ -3,8 +3,8 @@ for bit on any number of ranks.
 
 Disorder: the mass-weighted RMS and the maximum of the hourglass error eta_i
 (formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), hourglass
-(minus the work done by the hourglass forces), external work (body force and constraint
-reactions) and the balance total = kinetic + strain + hourglass - external, which is
+(minus the work done by the hourglass forces), external work (body force, constraint
+reactions and the work that changes the kinetic energy of prescribed motions) and the balance total = kinetic + strain + hourglass - external, which is
 constant for an exact integration. Momenta: linear (vector) and angular (scalar in 2D,
 vector in 3D).
 """

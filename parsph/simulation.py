@@ -318,6 +318,7 @@ class Simulation:
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
         u_old = self.u[:n].copy()
+        v_old = self.v[:n].copy() if self.bcs.moving else None
         f_hg_old = self.f_hg.copy()
         f_ext_old = self._external
         self._kick(0.5 * dt)
@@ -339,6 +340,11 @@ class Simulation:
         work = 0.5 * (f_ext_old + self._external) * du
         for b in self.bodies:
             self.totals["external_work"][b.index].add(work[b.lo:b.hi])
+        if v_old is not None:  # and the work that changes the kinetic energy of a prescribed motion
+            v = self.v[:n]
+            kinetic = np.where(self.bcs.mask, 0.5 * self.mass[:n, None] * (v * v - v_old * v_old), 0.0)
+            for b in self.bodies:
+                self.totals["external_work"][b.index].add(kinetic[b.lo:b.hi])
         self.step_count += 1
         self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
