@@ -10,8 +10,10 @@ A step is velocity-Verlet (kick-drift-kick leap-frog):
      migration, ghosts, neighbours and corrections in X^r, forces again]
 The scene's bodies share one particle set (global ids numbered body after body, so each
 body's owned particles are a contiguous run of rows); each body has its material law and
-formulation, and particles of different bodies are not neighbours. Which arrays a particle
-carries, migrates, checkpoints and mirrors comes from the field registry (parsph.fields).
+formulation, and particles of different bodies are not neighbours. The particles are a
+point set (parsph.points): which arrays a particle carries, migrates, checkpoints and
+mirrors comes from the field registry (parsph.fields), and ghost values are refreshed by
+name, as the stages' declarations require.
 Local arrays hold the rank's owned particles first, then its ghosts. Sums over particles
 (energies, the work accumulated step by step, obstacle forces) are exact (exact_sum), so
 that the history, like the particle state, is the same bit for bit on any number of ranks.
@@ -37,6 +39,7 @@ from parsph.materials.elastic import first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
+from parsph.points import PointSet
 from parsph.walls import Walls
 
 BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
@@ -147,8 +150,8 @@ class Simulation:
         self.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
         self.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
         # fields registered beyond the base and the updated reference: carried as declared
-        self.extra = {name: self._initial(name, fl, keep) for name in self.carried
-                      if name not in BASE_FIELDS and name not in UPDATED_STATE}
+        extra = {name: self._initial(name, fl, keep) for name in self.carried
+                 if name not in BASE_FIELDS and name not in UPDATED_STATE}
         self.F = np.zeros((keep, dim, dim))
         self.d, self.fs = self.u, self.F  # total-Lagrangian: the reference is X, F^r = I
         if self.updated:
@@ -171,6 +174,12 @@ class Simulation:
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
         self.hg_psi = np.zeros(n if variational else 0)
         self.youngs = np.array([b.constants.youngs for b in self.bodies])[self.body]
+        arrays = dict(X=self.X, measure=self.measure, volume=self.volume, mass=self.mass, support=self.support,
+                      groups=fl["groups"][:keep], u=self.u, v=self.v, d=self.d, F=self.F, fs=self.fs, f=self.f,
+                      B=self.B, VP=self.VP, J=self.J, psi=self.psi, **extra)
+        if self.updated:
+            arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
+        self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
@@ -262,7 +271,7 @@ class Simulation:
             reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
             if reads:
                 t0 = clock()
-                self.decomp.refresh(*(getattr(self, name) for name in reads))
+                self.particles.refresh(*reads)
                 stale.difference_update(reads)
                 seconds["halo"] += clock() - t0
             for stage in phase:
@@ -363,7 +372,7 @@ class Simulation:
         in X^r, rebuild the corrections and evaluate the forces in the new reference."""
         start = time.perf_counter()
         n = self.n_owned
-        owned = dict(self._owned_fields(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
+        owned = dict(self.particles.migrating(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
         for b in self.bodies:  # the penalty restarts at 0
             self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
@@ -388,20 +397,6 @@ class Simulation:
         self.updates += 1
         self.since_update = 0
 
-    def field_values(self, name: str) -> np.ndarray:
-        """The owned particles' values of the carried field `name` (parsph.fields)."""
-        n = self.n_owned
-        if name == "groups":
-            return (np.stack([self.groups[k] for k in self.group_names], axis=1).astype(np.uint8)
-                    if self.group_names else np.zeros((n, 0), np.uint8))
-        if name in self.extra:
-            return self.extra[name][:n]
-        return getattr(self, name)[:n]
-
-    def _owned_fields(self) -> dict:
-        """The owned particles' carried fields that migrate with them (with "gid")."""
-        return {name: self.field_values(name) for name in fields.migrating(self.carried)}
-
     @property
     def dt(self) -> float:
         """The step size the next step will use (unless shortened to end at t_end)."""
@@ -415,9 +410,8 @@ class Simulation:
         per_body = [sums[k: k + len(self.bodies)] for k in range(0, len(sums), len(self.bodies))]
         totals = {name: [s.to_json() for s in values] if len(values) > 1 else values[0].to_json()
                   for name, values in zip(self.totals, per_body)}
-        stored = [name for name in fields.checkpointed(self.carried) if name != "gid"]
         return {
-            "fields": {name: self.field_values(name) for name in stored}, "group_names": self.group_names,
+            "fields": self.particles.checkpointed(), "group_names": self.group_names,
             "totals": {**totals, "wall_force": self.wall_forces().tolist()},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
                       "since_update": self.since_update},
@@ -449,8 +443,8 @@ class Simulation:
             return self.disorder()[sel]
         if name == "spacing_ratio":
             return self.spacing_ratio()[sel]
-        if name in self.extra:
-            return self.extra[name][sel]
+        if name in fields.REGISTRY and fields.get(name).units is not None:  # a registered field
+            return self.particles.arrays[name][sel]
         raise ValueError(name)
 
     def disorder(self) -> np.ndarray:
