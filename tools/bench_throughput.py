@@ -4,9 +4,10 @@
 Elastic blocks in 2D and 3D (Saint Venant-Kirchhoff, cubic lattice, kernel radius 2.01 x
 spacing as in MACHDYN examples), stepped from a small random velocity field, in the
 formulations: total-Lagrangian with hourglass control off and on (alpha = 50, both forms),
-with Hessian's-difference stabilisation (eta = 1), and updated-Lagrangian with eta = 1 and
-the reference updated every 3 steps (the paper's stress setting) or every 30. Each row
-also gives the time of one reference update per particle. Compile time and set-up are
+with Hessian's-difference stabilisation (eta = 1), updated-Lagrangian with eta = 1 and
+the reference updated every 3 steps (the paper's stress setting) or every 30, and [R]'s
+symmetrised SPH and RLM. Each updated row also gives the time of one reference update per
+particle. Compile time and set-up are
 excluded; each case is timed over --steps steps after a warm-up. Prints a table and writes
 it as JSON.
 
@@ -31,7 +32,8 @@ from parsph.build import build_local  # noqa: E402
 from parsph.simulation import Simulation  # noqa: E402
 
 
-def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0) -> dict:
+def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0,
+          method: str = "tlsph") -> dict:
     side = round(particles ** (1 / dim))
     spacing = 1.0 / side
     raw = {
@@ -42,14 +44,14 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
         "material": {"model": "saint_venant_kirchhoff", "density": 1000.0, "youngs_modulus": 1e9,
                      "poisson_ratio": 0.3},
         "formulation": {"hourglass": alpha, "hourglass_form": form, "hessian": eta,
-                        "type": "ulsph" if every else "tlsph", "update_every": every},
+                        "type": "ulsph" if every else method, "update_every": every},
         "time": {"end": 1.0},
     }
     return config.validate(raw)
 
 
-def measure(dim, particles, alpha, form, steps, eta=0.0, every=0):
-    scene = block(dim, particles, alpha, form, eta, every)
+def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"):
+    scene = block(dim, particles, alpha, form, eta, every, method)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
@@ -62,10 +64,17 @@ def measure(dim, particles, alpha, form, steps, eta=0.0, every=0):
     n = sim.n_owned
     pairs = int(sim.ref.ptr[-1])
     update = sim.stage_seconds.get("reference update", 0.0) / max(sim.updates, 1)
-    return {"dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
+    return {"method": scene["formulation"]["type"], "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
             "hourglass_form": form if alpha > 0 else "-", "eta": eta, "update_every": every,
             "steps": steps, "us_per_particle_step": 1e6 * seconds / (steps * n),
             "us_per_particle_update": 1e6 * update / n}
+
+
+# (formulation, alpha, hourglass form, eta, update every N steps)
+CASES = (("tlsph", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0),
+         ("tlsph", 50.0, "variational", 0.0, 0), ("tlsph", 0.0, "variational", 1.0, 0),
+         ("tlsph", 0.0, "variational", 1.0, 3), ("tlsph", 0.0, "variational", 1.0, 30),
+         ("sph", 0.0, "variational", 0.0, 0), ("rlm", 0.0, "variational", 0.0, 0))
 
 
 def main():
@@ -77,12 +86,10 @@ def main():
     args = ap.parse_args()
     rows = []
     for dim, count in ((2, args.particles_2d), (3, args.particles_3d)):
-        for alpha, form, eta, every in ((0.0, "variational", 0.0, 0), (50.0, "paper", 0.0, 0),
-                                        (50.0, "variational", 0.0, 0), (0.0, "variational", 1.0, 0),
-                                        (0.0, "variational", 1.0, 3), (0.0, "variational", 1.0, 30)):
-            rows.append(measure(dim, count, alpha, form, args.steps, eta, every))
+        for method, alpha, form, eta, every in CASES:
+            rows.append(measure(dim, count, alpha, form, args.steps, eta, every, method))
             r = rows[-1]
-            kind = f"UL every {every:2d}" if every else "TL         "
+            kind = f"UL every {every:2d}" if every else {"tlsph": "TL", "sph": "SPH", "rlm": "RLM"}[method].ljust(11)
             print(f"{r['dim']}D  {r['particles']:7d} particles  {r['neighbours']:5.1f} neighbours  {kind} "
                   f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s} eta {eta:3.1f}  "
                   f"{r['us_per_particle_step']:.3f} us/particle-step"
