@@ -182,7 +182,7 @@ def pytest_report_header(config):
             "MPI jobs: idle ranks spin (no idle-sleep library: no C compiler, or PARSPH_TEST_IDLE_SLEEP=0)"]
 
 
-# ---- order and grouping (pytest-xdist, see tools/test)
+# ---- order (see tools/test: pytest-xdist workers)
 def _shares_a_module_fixture(item) -> bool:
     """Does the test use a module- or class-scoped fixture (a run several tests read)?"""
     info = getattr(item, "_fixtureinfo", None)
@@ -190,27 +190,21 @@ def _shares_a_module_fixture(item) -> bool:
     return any(d and d[-1].scope in ("module", "class") for d in defs)
 
 
-@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """The long tests first (marked slow, then those that start MPI jobs), so that with
-    several workers none is left running a long test alone at the end; the tests of a module
-    that share a module-scoped fixture stay together and, under --dist loadgroup, go to one
-    worker (the fixture's run is made once). Only the order changes."""
+    """The long tests first: those marked slow, then those that start MPI jobs, then the
+    rest, so that with several workers none is left running a long test alone at the end.
+    The tests that share a module-scoped fixture stay next to each other (one run of the
+    fixture per worker). Only the order changes (stable sort: the collection order within
+    each class)."""
     def rank(item):
         return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("mpi") else 2
 
-    group_rank = {}
+    def module(item):
+        return item.nodeid.split("::")[0]
+
+    shared = {}
     for item in items:
         if _shares_a_module_fixture(item):
-            module = item.nodeid.split("::")[0]
-            group_rank[module] = min(group_rank.get(module, 2), rank(item))
-    grouped = config.pluginmanager.hasplugin("xdist")
-
-    def key(item):
-        module = item.nodeid.split("::")[0]
-        return group_rank[module] if module in group_rank and _shares_a_module_fixture(item) else rank(item)
-
-    for item in items:
-        if grouped and _shares_a_module_fixture(item):
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-    items.sort(key=key)  # stable: the collection order within each rank
+            shared[module(item)] = min(shared.get(module(item), 2), rank(item))
+    items.sort(key=lambda item: shared.get(module(item), rank(item)) if _shares_a_module_fixture(item)
+               else rank(item))
