@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -94,3 +95,116 @@ def parsph(args, ranks: int = 1, timeout: float = 300, cwd=None, env=None) -> su
 @pytest.fixture
 def run_parsph():
     return parsph
+
+
+# ---- MPI jobs with more ranks than cores
+# MPICH (ch4:ucx) waits for a message by calling ucp_worker_progress in a loop. With more
+# ranks than cores (3 ranks, or 2 ranks beside another job, on 2 cores) a waiting rank spins
+# through its whole time slice while the rank it waits for is not running: each collective
+# then costs ~10 ms, and a 3-rank run of 40 steps takes ~30 s instead of ~3 s. This library,
+# preloaded into the processes the tests start, lets a rank that found nothing to do in 256
+# polls in a row sleep for a microsecond (gives its core away). Only waiting changes, not
+# what is sent or computed; processes that never call ucp_worker_progress (other MPI builds)
+# are not affected. PARSPH_TEST_IDLE_SLEEP=0 turns it off; without a C compiler it is not used.
+IDLE_SLEEP_C = r"""
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+typedef unsigned (*progress_fn)(void *);
+static progress_fn real_progress;
+static unsigned idle_polls;
+
+unsigned ucp_worker_progress(void *worker)
+{
+    if (!real_progress) {
+        real_progress = (progress_fn)dlsym(RTLD_NEXT, "ucp_worker_progress");
+        if (!real_progress) { /* libucp loaded by a library that was dlopen()ed */
+            void *ucp = dlopen("libucp.so.0", RTLD_NOW | RTLD_NOLOAD);
+            if (ucp)
+                real_progress = (progress_fn)dlsym(ucp, "ucp_worker_progress");
+        }
+        if (!real_progress) {
+            fputs("tests/conftest.py idle-sleep library: ucp_worker_progress not found\n", stderr);
+            abort();
+        }
+    }
+    unsigned events = real_progress(worker);
+    if (events)
+        idle_polls = 0;
+    else if (++idle_polls >= 256) {
+        idle_polls = 0;
+        usleep(1);
+    }
+    return events;
+}
+"""
+_IDLE_SLEEP_ENV = "PARSPH_TEST_IDLE_SLEEP_LIB"  # set once built: pytest-xdist workers inherit it
+_idle_sleep_dir = None
+
+
+def _build_idle_sleep_library():
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        return None
+    folder = tempfile.mkdtemp(prefix="parsph-tests-")
+    source, library = Path(folder, "idle_sleep.c"), Path(folder, "idle_sleep.so")
+    source.write_text(IDLE_SLEEP_C)
+    proc = subprocess.run([cc, "-O2", "-shared", "-fPIC", "-o", str(library), str(source), "-ldl"],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return library
+
+
+def pytest_configure(config):
+    global _idle_sleep_dir
+    if os.environ.get("PARSPH_TEST_IDLE_SLEEP", "1") == "0" or os.environ.get(_IDLE_SLEEP_ENV):
+        return
+    library = _build_idle_sleep_library()
+    if library is not None:
+        _idle_sleep_dir = library.parent
+        os.environ[_IDLE_SLEEP_ENV] = str(library)
+        os.environ["LD_PRELOAD"] = " ".join(filter(None, [str(library), os.environ.get("LD_PRELOAD")]))
+
+
+def pytest_unconfigure(config):
+    if _idle_sleep_dir is not None:
+        shutil.rmtree(_idle_sleep_dir, ignore_errors=True)
+
+
+def pytest_report_header(config):
+    library = os.environ.get(_IDLE_SLEEP_ENV)
+    return [f"MPI jobs: idle ranks sleep ({library} preloaded)" if library else
+            "MPI jobs: idle ranks spin (no idle-sleep library: no C compiler, or PARSPH_TEST_IDLE_SLEEP=0)"]
+
+
+# ---- order (see tools/test: pytest-xdist workers)
+def _shares_a_module_fixture(item) -> bool:
+    """Does the test use a module- or class-scoped fixture (a run several tests read)?"""
+    info = getattr(item, "_fixtureinfo", None)
+    defs = info.name2fixturedefs.values() if info is not None else ()
+    return any(d and d[-1].scope in ("module", "class") for d in defs)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The long tests first: those marked slow, then those that start MPI jobs, then the
+    rest, so that with several workers none is left running a long test alone at the end.
+    The tests that share a module-scoped fixture stay next to each other (one run of the
+    fixture per worker). Only the order changes (stable sort: the collection order within
+    each class)."""
+    def rank(item):
+        return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("mpi") else 2
+
+    def module(item):
+        return item.nodeid.split("::")[0]
+
+    shared = {}
+    for item in items:
+        if _shares_a_module_fixture(item):
+            shared[module(item)] = min(shared.get(module(item), 2), rank(item))
+    items.sort(key=lambda item: shared.get(module(item), rank(item)) if _shares_a_module_fixture(item)
+               else rank(item))
