@@ -27,3 +27,16 @@ def cantilever_stiffness(youngs, poisson, length, height, thickness, plane_strai
     8 mm x 1 mm beam of E = 100 GPa, nu = 0.3, 1 mm thick."""
     e = youngs / (1 - poisson ** 2) if plane_strain else youngs
     return 3 * e * thickness * height ** 3 / 12 / length ** 3
+
+
+def free_rod_velocity(x, t, length, wave_speed, initial):
+    """Axial velocity of an elastic rod with free ends on [0, length] that starts at rest in
+    its natural length with velocity `initial(x)` (a function on arrays): d'Alembert,
+    v = (V(x - c t) + V(x + c t)) / 2 with V the even, 2L-periodic extension of the
+    initial velocity (zero stress at both ends). [R §9.2]'s rod with nu = 0 is one."""
+    def extended(s):
+        s = np.mod(s, 2.0 * length)
+        return initial(np.where(s > length, 2.0 * length - s, s))
+
+    x = np.asarray(x, dtype=float)
+    return 0.5 * (extended(x - wave_speed * t) + extended(x + wave_speed * t))

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parsph import expressions
+
 
 @dataclass
 class Constraint:
@@ -80,13 +82,21 @@ class BoundaryConditions:
                 u[c.rows, c.cols] = d[c.cols]
 
 
-def apply_initial_conditions(specs: list, masks: dict, X, u, v) -> None:
-    """Initial velocity fields and initial displacement gradients on groups [scene 'initial'];
-    masks and arrays cover the owned particles."""
-    for spec in specs:
+def apply_initial_conditions(specs: list, masks: dict, X, gid, u, v, parameters: dict) -> None:
+    """Initial velocities and displacements on groups [scene 'initial']: uniform, a rigid
+    rotation, a displacement gradient, or fields given as expressions of the reference
+    position (parsph.expressions, over the scene's `parameters`); masks and arrays cover
+    the owned particles (global ids `gid`)."""
+    dim = X.shape[1]
+    for i, spec in enumerate(specs):
         sel = np.flatnonzero(masks[spec["group"]])
         rel = X[sel] - np.asarray(spec["center"])
-        if spec["type"] == "velocity":
+        if spec["type"].endswith("_field"):
+            target = v if spec["type"] == "velocity_field" else u
+            for k, text in enumerate(spec["expression"]):
+                field = expressions.Field(f"initial[{i}].expression[{k}]", text, parameters, dim)
+                target[sel, k] = field(X[sel], gid[sel])
+        elif spec["type"] == "velocity":
             v[sel] = spec["value"]
         elif spec["type"] == "angular_velocity":
             omega = np.asarray(spec["omega"])

@@ -14,7 +14,8 @@ import numpy as np
 
 from parsph import config, geometry
 from parsph.errors import InputError
-from parsph.parallel.decomposition import LocalBody, add_ghosts, block_cuts, nearby, partition
+from parsph.geometry.stress_points import BoxStressPoints
+from parsph.parallel.decomposition import LocalBody, block_cuts, localize, nearby, partition
 from parsph.parallel.runtime import collective, warn
 
 PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": geometry.Cylinder,
@@ -156,15 +157,47 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
                  f"parts[{p}] lie within half a spacing ({0.5 * min(spacing[q], spacing[p]):g}) of "
                  f"parts[{q}]'s particles (not coincident, so both are kept and the density doubles there)")
     X, measure = owned["X"], owned["measure"]
-    factor = {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[dim]
+    factor = _thickness(scene)
     owned["volume"] = measure * factor
     owned["mass"] = owned["volume"] * body["material"]["density"]
+    if any(b["formulation"]["type"] == "kbm" for b in config.bodies(scene)):  # quadrature weights
+        owned["weight"] = owned["volume"] if body["formulation"]["type"] != "kbm" else \
+            BoxStressPoints(gens[0], factor).particle_weights(owned["gid"])
     neighbours = scene["kernel"]["neighbours"]
     if neighbours > 0:
         owned["support"] = _neighbour_support(X, neighbours, comm)
     else:
         owned["support"] = scene["kernel"]["support"] * _spacing(body["parts"], measure, dim)
     return owned
+
+
+def _thickness(scene: dict) -> float:
+    """Volume per unit d-dimensional measure: the cross-section in 1D, the thickness in 2D."""
+    return {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[scene["scene"]["dimension"]]
+
+
+def build_stress_points(scene: dict, comm) -> dict | None:
+    """This rank's block of the stress points of the scene's kbm bodies (formulations.kbm;
+    global ids body after body): "gid", "X", "volume" (quadrature weight), "body"; None if
+    no body uses them. Collective."""
+    specs = config.bodies(scene)
+    if not any(b["formulation"]["type"] == "kbm" for b in specs):
+        return None
+    dim = scene["scene"]["dimension"]
+    gens = [(b, BoxStressPoints(_generators(spec["parts"], "geometry.parts", dim)[0], _thickness(scene)))
+            for b, spec in enumerate(specs) if spec["formulation"]["type"] == "kbm"]
+    first = np.cumsum([0] + [g.count for _, g in gens])
+    start, stop = block_cuts(first[-1], comm.size)[comm.rank: comm.rank + 2]
+    X, volume, body = [np.zeros((0, dim))], [np.zeros(0)], [np.zeros(0, np.int64)]
+    for (b, g), offset in zip(gens, first):
+        lo, hi = max(start, offset), min(stop, offset + g.count)
+        if lo < hi:
+            x, w = g.rows(lo - offset, hi - offset)
+            X.append(x)
+            volume.append(w)
+            body.append(np.full(hi - lo, b, np.int64))
+    return {"gid": np.arange(start, stop, dtype=np.int64), "X": np.concatenate(X),
+            "volume": np.concatenate(volume), "body": np.concatenate(body)}
 
 
 def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
@@ -219,8 +252,10 @@ def build_particles(scene: dict, comm) -> dict:
 
 
 def build_local(scene: dict, comm) -> LocalBody:
-    """This rank's particles of `scene` with their ghost layers, ready for the simulation."""
+    """This rank's particles of `scene` with their ghost layers (and the other point sets,
+    if any), ready for the simulation."""
     owned, offsets = build_bodies(scene, comm)
-    local = add_ghosts(owned, "X", comm)
+    stress = build_stress_points(scene, comm)
+    local = localize(owned, {} if stress is None else {"stress_points": stress}, "X", comm)
     local.offsets = offsets
     return local

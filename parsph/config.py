@@ -21,7 +21,7 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from parsph import quantities
+from parsph import expressions, quantities
 from parsph.errors import InputError
 from parsph.materials import ELASTIC_KEYS, LAWS
 
@@ -66,7 +66,7 @@ def in_range(lo, hi, lo_open=False, hi_open=False):
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = tuple(LAWS)
-FORMULATIONS = ("tlsph", "ulsph", "sph", "rlm")
+FORMULATIONS = ("tlsph", "ulsph", "sph", "rlm", "kbm")
 
 
 def snapshot_fields(v):
@@ -112,7 +112,8 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS),
                     "tlsph: corrected SPH, total-Lagrangian [G]; ulsph: the same from an updated "
                     "reference [V §3.1]; sph: symmetrised SPH; rlm: Randles-Libersky normalisation "
-                    "[R Table 1] (Lagrangian kernel, nodal integration)"),
+                    "[R Table 1] (Lagrangian kernel, nodal integration); kbm: Krongauz-Belytschko "
+                    "corrected gradients with stress points [R §5.2] (box parts)"),
         "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
         "hessian_correction": Key("str", "weighted", one_of("weighted", "paper"),
                                   "linear correction of the kernel Hessian: weighted: the A term "
@@ -125,7 +126,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
         "hourglass": Key("float", None, non_negative,
                          "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
-                         "0 for sph and rlm (the methods as [R] compares them)"),
+                         "0 for sph, rlm and kbm (the methods as [R] compares them)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
     },
@@ -214,9 +215,13 @@ SYMMETRY_KEYS = {
     "position": Key("float", REQUIRED, doc="the plane's coordinate on that axis [m]"),
 }
 INITIAL_KEYS = {
-    "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient")),
+    "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient",
+                                        "velocity_field", "displacement_field")),
     "group": Key("str", "all"),
     "value": Key("vector", None, doc="velocity [m/s]"),
+    "expression": Key("strlist", None, doc="velocity_field [m/s], displacement_field [m]: one expression "
+                                           "of the reference position x, y, z and the parameters per "
+                                           "component, e.g. [\"exp(-25000*(x-0.03)**2)\", \"0\"]"),
     "omega": Key("vector", None, doc="angular velocity: [w] in 2D, [wx, wy, wz] in 3D [rad/s]"),
     "gradient": Key("matrix", None, doc="displacement gradient H: u = H (X - center)"),
     "center": Key("vector", None),
@@ -438,11 +443,16 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
     for i, t in enumerate(_array("initial", raw.get("initial"))):
         ic = _table(f"initial[{i}]", t, INITIAL_KEYS, dim)
         check_group(f"initial[{i}].group", ic["group"])
-        need = {"velocity": "value", "angular_velocity": "omega", "displacement_gradient": "gradient"}[ic["type"]]
+        need = {"velocity": "value", "angular_velocity": "omega", "displacement_gradient": "gradient",
+                "velocity_field": "expression", "displacement_field": "expression"}[ic["type"]]
         if ic[need] is None:
             raise InputError(f"missing required key 'initial[{i}].{need}' for type '{ic['type']}'")
         if ic["type"] == "velocity":
             _vector_len(f"initial[{i}].value", ic["value"], dim)
+        if ic["type"].endswith("_field"):
+            _vector_len(f"initial[{i}].expression", ic["expression"], dim)
+            for k, text in enumerate(ic["expression"]):
+                expressions.Field(f"initial[{i}].expression[{k}]", text, raw.get("parameters", {}), dim)
         if ic["type"] == "angular_velocity":
             if dim == 1:
                 raise InputError(f"initial[{i}]: angular_velocity needs a 2D or 3D scene")
@@ -569,9 +579,12 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
                          f"(steps) or {path}.update_strain (log strain)")
     if form["type"] != "ulsph" and (form["update_every"] or form["update_strain"]):
         raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
-    if form["type"] in ("sph", "rlm") and form["force_form"] != "pair":
+    if form["type"] in ("sph", "rlm", "kbm") and form["force_form"] != "pair":
         raise InputError(f"{path}.force_form applies to tlsph and ulsph; {form['type']} has its own force row")
-    if form["type"] in ("sph", "rlm") and form["hessian"] > 0:
+    if form["type"] == "kbm" and form["hourglass"] > 0:
+        raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm; kbm's stress points "
+                         "stabilise it (give 0 or leave it out)")
+    if form["type"] in ("sph", "rlm", "kbm") and form["hessian"] > 0:
         raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
                          f"not to {form['type']}")
     return form
@@ -666,8 +679,22 @@ def validate(raw: dict) -> dict:
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
             "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
+    for b, body in enumerate(bodies(scene)):
+        if body["formulation"]["type"] == "kbm":
+            _check_stress_point_parts(body, "bodies[{b}]".format(b=b) if multi else "geometry", scene)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
+
+
+def _check_stress_point_parts(body: dict, where: str, scene: dict) -> None:
+    """kbm places its stress points in the cells of a box lattice (geometry.stress_points)."""
+    parts = body["parts"]
+    if len(parts) != 1 or parts[0]["shape"] != "box" or parts[0]["placement"] != "cell":
+        raise InputError(f"formulation.type = 'kbm' places stress points in the cells of one box lattice: "
+                         f"{where}.parts must be a single box with placement = 'cell'")
+    if scene["symmetry"]:
+        raise InputError("[[symmetry]] planes cannot be used with formulation.type = 'kbm' (stress points have "
+                         "no mirror images); model the whole body")
 
 
 def parse_override(text: str) -> tuple[list[str | int], Any]:

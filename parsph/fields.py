@@ -10,9 +10,11 @@ symmetry plane follows from its kind. Which stage refreshes a field's ghost valu
 declared here: stages declare the fields they read at neighbours (formulations.base), and
 the halo refreshes are derived from that.
 
-`register` adds a field. The particles carry every field owned by "particles" (the base
-fields below, and any other declared so) plus the fields owned by the formulations and
-material laws the scene's bodies use (`carried`).
+Fields belong to a point set (`points`): "particles" (mass and degrees of freedom), or a
+set of integration points without mass, such as "stress_points". `register` adds a field.
+A point set carries every field of that set owned by "all" (the base fields below, and any
+other declared so) plus the fields owned by the formulations and material laws the scene's
+bodies use (`carried`).
 """
 
 from __future__ import annotations
@@ -34,9 +36,10 @@ class Field:
     checkpoint: bool = True  # stored in checkpoints (implies migrate)
     units: str | None = None  # snapshots and probes may show it, in these units
     doc: str = ""
-    owner: str = "particles"  # "particles": every particle carries it; else the formulation
-    #                          or material law that declares it (carried where a body uses it)
+    owner: str = "all"  # "all": every point of the set carries it; else the formulation or
+    #                    material law that declares it (carried where a body uses it)
     initial: object = None  # optional: (X, gid) -> initial values (else zeros; u, v: conditions)
+    points: str = "particles"  # the point set that carries it
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -60,16 +63,16 @@ class Field:
         return value
 
 
-REGISTRY: dict[str, Field] = {}
+REGISTRY: dict[str, dict[str, Field]] = {}  # point set -> field name -> Field
 
 
 def register(*fields: Field) -> None:
-    """Declare fields; a name may be declared again only with the same declaration."""
+    """Declare fields; a name may be declared again in its set only with the same declaration."""
     for field in fields:
-        known = REGISTRY.get(field.name)
+        known = REGISTRY.setdefault(field.points, {}).get(field.name)
         if known is not None and known != field:
-            raise ValueError(f"field '{field.name}' is declared twice, differently")
-        REGISTRY[field.name] = field
+            raise ValueError(f"field '{field.name}' of the {field.points} is declared twice, differently")
+        REGISTRY[field.points][field.name] = field
 
 
 # The particles: reference configuration, kinematic state, and the data every particle carries.
@@ -87,20 +90,24 @@ PARTICLE_FIELDS = (
 register(*PARTICLE_FIELDS)
 
 
-def carried(owners) -> list:
-    """Names of the fields the particles carry when the scene uses the formulations and laws
-    named in `owners`, in declaration order."""
-    return [f.name for f in REGISTRY.values() if f.owner == "particles" or f.owner in owners]
+def carried(owners, points: str = "particles") -> list:
+    """Names of the fields the point set `points` carries when the scene uses the
+    formulations and laws named in `owners`, in declaration order."""
+    return [f.name for f in REGISTRY.get(points, {}).values() if f.owner == "all" or f.owner in owners]
 
 
-def get(name: str) -> Field:
-    return REGISTRY[name]
+def get(name: str, points: str = "particles") -> Field:
+    return REGISTRY[points][name]
 
 
-def migrating(names) -> list:
+def known(name: str, points: str = "particles") -> bool:
+    return name in REGISTRY.get(points, {})
+
+
+def migrating(names, points: str = "particles") -> list:
     """The names among `names` whose fields travel with their points."""
-    return [n for n in names if REGISTRY[n].migrate]
+    return [n for n in names if REGISTRY[points][n].migrate]
 
 
-def checkpointed(names) -> list:
-    return [n for n in names if REGISTRY[n].checkpoint]
+def checkpointed(names, points: str = "particles") -> list:
+    return [n for n in names if REGISTRY[points][n].checkpoint]

@@ -38,11 +38,11 @@ class PointSet:
 
     def migrating(self) -> dict:
         """The owned points' carried fields that travel with them (with "gid")."""
-        return {name: self.owned(name) for name in fields.migrating(self.carried)}
+        return {name: self.owned(name) for name in fields.migrating(self.carried, self.name)}
 
     def checkpointed(self) -> dict:
         """The owned points' carried fields a checkpoint stores (the global ids are the rows)."""
-        return {name: self.owned(name) for name in fields.checkpointed(self.carried) if name != "gid"}
+        return {name: self.owned(name) for name in fields.checkpointed(self.carried, self.name) if name != "gid"}
 
     def refresh(self, *names: str) -> None:
         """Copy the owners' values of the named arrays into the ghost (and mirror) rows."""

@@ -44,7 +44,7 @@ BUILT_IN = {q.name: q for q in _BUILT_IN}
 def registry() -> dict:
     """Every quantity by name: the built-in ones, then the registered fields with units."""
     out = dict(BUILT_IN)
-    for f in fields.REGISTRY.values():
+    for f in fields.REGISTRY["particles"].values():
         if f.units is not None and f.name not in out:
             out[f.name] = Quantity(f.name, f.kind, f.units, probe=f.kind in ("scalar", "vector"), doc=f.doc)
     return out

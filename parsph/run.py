@@ -93,7 +93,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
         scene = config.load(scene_path, overrides)
     out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
     from parsph.build import build_local
-    from parsph.parallel.decomposition import add_ghosts, partition
+    from parsph.parallel.decomposition import localize
 
     output_dir.lock(out_dir)
     if restart is None:
@@ -106,7 +106,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
             check_resumable(scene, out_dir)
     fields = data.pop("fields")
     position = "Xr" if "Xr" in fields else "X"
-    local = add_ghosts(partition(fields, position, COMM), position, COMM)
+    local = localize(fields, data.pop("sets"), position, COMM)
     local.offsets = None if data["offsets"] is None else np.array(data["offsets"], np.int64)
     say(f"parsph: restarting from {data['path']} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
     return scene, out_dir, [], local, data

@@ -33,7 +33,7 @@ from parsph.bc import BoundaryConditions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, total
-from parsph.formulations import reference, tlsph
+from parsph.formulations import kbm, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
 from parsph.materials.elastic import first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
@@ -58,8 +58,10 @@ class Body:
         self.first, self.last = first, last
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
-        self.formulation = NodalFormulation(spec["formulation"], dim, self.law.law_id)
+        kind = kbm.StressPointFormulation if spec["formulation"]["type"] == "kbm" else NodalFormulation
+        self.formulation = kind(spec["formulation"], dim, self.law.law_id)
         self.lo = self.hi = 0
+        self.stress_rows = (0, 0)  # its owned rows of the stress points (kbm)
         self.stages = []
 
 
@@ -100,7 +102,9 @@ class Simulation:
         self._adopt(local)
         n = self.n_owned
         if restart is None:
-            apply_initial_conditions(scene["initial"], self.groups, self.X[:n], self.u[:n], self.v[:n])
+            with collective(comm):
+                apply_initial_conditions(scene["initial"], self.groups, self.X[:n], self.gid[:n], self.u[:n],
+                                         self.v[:n], scene["parameters"])
             self.bcs.set_displacement(self.u[:n], 0.0)
             self.bcs.set_velocity(self.v[:n], 0.0)
         else:
@@ -180,20 +184,67 @@ class Simulation:
         if self.updated:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
+        self.stress_points = None
+        if any(b.formulation.type == "kbm" for b in self.bodies):
+            self._adopt_stress_points(local.sets[kbm.SET], keep)
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 
-    def _initial(self, name: str, fl: dict, keep: int) -> np.ndarray:
-        """A registered field's values on the local rows: as carried in `fl` (migrated,
-        read from a checkpoint), else its declared initial values, else zeros."""
+    def _adopt_stress_points(self, local: LocalBody, keep: int) -> None:
+        """The stress points (formulations.kbm): owned, then ghosts (within the kernel
+        support of an owned particle), their carried fields, work arrays and halo plan; then
+        the kbm relations and coefficients."""
+        dim, fl = self.dim, local.fields
+        rows = local.n_owned + local.n_ghost
+        carried = fields.carried({b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies},
+                                 kbm.SET)
+        arrays = {name: self._initial(name, fl, rows, kbm.SET) for name in carried}
+        arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
+                      psi=np.zeros(rows), shepard=np.zeros(rows), shepard_grad=np.zeros((rows, dim)))
+        self.stress_points = PointSet(kbm.SET, arrays["gid"], local.n_owned, Decomposition(local, self.comm),
+                                      carried, arrays)
+        self.particles.arrays.update(shepard=np.zeros(keep), shepard_grad=np.zeros((keep, dim)))
+        body = arrays["body"][: local.n_owned]
+        for b in self.bodies:
+            b.stress_rows = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
+        with collective(self.comm):
+            self.stress_point_data = kbm.build_reference(self, self.scene["kernel"]["type"])
+
+    def unstable_stress_point(self, q: int) -> ParsphError:
+        """The error for owned stress point q, inverted or with a stress that is not finite."""
+        sp = self.stress_points.arrays
+        where = ", ".join(f"{c:.6g}" for c in sp["X"][q])
+        return ParsphError(
+            f"stress point {int(sp['gid'][q])} at reference ({where}) is inverted or its stress is not finite "
+            f"(J = {sp['J'][q]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
+            f"unstable: {self._advice()}")
+
+    def point_sets(self) -> list:
+        """The rank's point sets: the particles, then the stress points (if any)."""
+        return [self.particles] + ([self.stress_points] if self.stress_points is not None else [])
+
+    def _refresh(self, names) -> None:
+        """Refresh the ghost values of the named arrays: "NAME" of the particles, "SET.NAME"
+        of another point set."""
+        by_set = collections.defaultdict(list)
+        for name in names:
+            where, _, field = name.rpartition(".")
+            by_set[where or "particles"].append(field)
+        for points in self.point_sets():
+            if by_set.get(points.name):
+                points.refresh(*by_set[points.name])
+
+    def _initial(self, name: str, fl: dict, keep: int, points: str = "particles") -> np.ndarray:
+        """A registered field's values on the local rows of a point set: as carried in `fl`
+        (migrated, read from a checkpoint), else its declared initial values, else zeros."""
         if name in fl:
             return fl[name][:keep].copy()
-        field = fields.get(name)
+        field = fields.get(name, points)
         if field.initial is not None:
-            return np.asarray(field.initial(fl["X"][:keep], self.gid), np.float64).copy()
+            return np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
         return np.zeros((keep,) + field.shape(self.dim))
 
     def _hourglass_frequencies(self) -> np.ndarray:
@@ -271,7 +322,7 @@ class Simulation:
             reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
             if reads:
                 t0 = clock()
-                self.particles.refresh(*reads)
+                self._refresh(reads)
                 stale.difference_update(reads)
                 seconds["halo"] += clock() - t0
             for stage in phase:
@@ -412,6 +463,7 @@ class Simulation:
                   for name, values in zip(self.totals, per_body)}
         return {
             "fields": self.particles.checkpointed(), "group_names": self.group_names,
+            "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in self.point_sets()[1:]},
             "totals": {**totals, "wall_force": self.wall_forces().tolist()},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
                       "since_update": self.since_update},
@@ -443,7 +495,7 @@ class Simulation:
             return self.disorder()[sel]
         if name == "spacing_ratio":
             return self.spacing_ratio()[sel]
-        if name in fields.REGISTRY and fields.get(name).units is not None:  # a registered field
+        if fields.known(name) and fields.get(name).units is not None:  # a registered field
             return self.particles.arrays[name][sel]
         raise ValueError(name)
 
@@ -492,7 +544,10 @@ class Simulation:
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            out["strain"].append(total(self.volume[lo:hi] * self.psi[lo:hi]))
+            if b.formulation.type == "kbm":  # the particles' and stress points' quadrature weights
+                out["strain"].append(total(b.formulation.strain_energy_terms(self, b)))
+            else:
+                out["strain"].append(total(self.volume[lo:hi] * self.psi[lo:hi]))
             out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
             out["external"].append(acc["external_work"])
         return out

@@ -10,8 +10,21 @@ the displacement). No refresh is placed by hand.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from typing import Callable
+
+
+def source_hash(*paths: str) -> str:
+    """Hash of the source files compiled stages are made from. Numba keys a cached closure
+    by its own bytecode and captured values only, not by the functions it inlines; a stage
+    that captures this hash misses stale cache entries after any change to these files (or
+    while a process still runs old code) instead of loading them."""
+    digest = hashlib.sha256()
+    for path in paths:
+        with open(path, "rb") as fh:
+            digest.update(fh.read())
+    return digest.hexdigest()
 
 
 @dataclass(frozen=True)

@@ -48,29 +48,17 @@ form) and RLM (its own force row) of formulations.nodal.
 from __future__ import annotations
 
 import functools
-import hashlib
 import math
 
 import numpy as np
 from numba import njit
 
+from parsph.formulations.base import source_hash
 from parsph.materials import elastic, update
 from parsph.materials.elastic import det, right_cauchy_green
 
 
-def _source_hash() -> str:
-    """Hash of the source the compiled stages are made from. Numba keys a cached closure by
-    its own bytecode and captured values only, not by the functions it inlines; capturing
-    this hash makes any change to these files (or a process still running old code) miss
-    the stale cache entries instead of loading them."""
-    digest = hashlib.sha256()
-    for path in (__file__, elastic.__file__, update.__file__):
-        with open(path, "rb") as fh:
-            digest.update(fh.read())
-    return digest.hexdigest()
-
-
-_SOURCE_HASH = _source_hash()
+_SOURCE_HASH = source_hash(__file__, elastic.__file__, update.__file__)
 
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2

@@ -95,6 +95,7 @@ class Box:
             raise ValueError(f"box: placement must be 'cell' or 'node', got {placement!r}")
         lengths = [float(b) - float(a) for a, b in zip(lo, hi)]
         what = f"lengths {', '.join(f'{x:g}' for x in lengths)} at spacing {h0:g}"
+        self.lower, self.upper = [float(a) for a in lo], [float(b) for b in hi]
         counts = []
         for k, length in enumerate(lengths):
             _check_count("box", length / h0, what)

@@ -3,7 +3,8 @@
 A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the reference
 configuration (positions, measures, volumes, masses, kernel supports, group membership),
 the state (displacement, velocity) and, in the updated formulation, the current reference
-(X^r, F^r, V^r), plus the clock (time, step, dt, reference updates), the accumulated
+(X^r, F^r, V^r); the checkpointed fields of any other point set (stress points) in a group
+of that name, in its global-id order; plus the clock (time, step, dt, reference updates), the accumulated
 energies, the output schedules and the resolved scene. It is written by all ranks together
 under a temporary name, made durable (fsync) and renamed, so a checkpoint either exists
 whole or not at all; the last K are kept.
@@ -129,12 +130,18 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
     with collective():
         if comm.rank == 0:
             os.makedirs(folder, exist_ok=True)
-    ensure_space(out_dir, _estimate_bytes(fields, scene_json, comm), f"the checkpoint at step {sim.step_count}")
+    sets = state["sets"]
+    size = _estimate_bytes(dict(fields, **{f"{name}/{k}": v for name, (_, _, f) in sets.items() for k, v in f.items()}),
+                           scene_json, comm)
+    ensure_space(out_dir, size, f"the checkpoint at step {sim.step_count}")
     try:
         with collective():
             with ParticleFile(tmp, "w", comm, userblock_size=USERBLOCK) as out:
                 for field, rows in fields.items():
                     out.write_rows(field, gid, rows, sim.decomp.total)
+                for name, (set_gid, set_total, set_fields) in sets.items():
+                    for field, rows in set_fields.items():
+                        out.write_rows(f"{name}/{field}", set_gid, rows, set_total)
                 if out.writer:
                     attrs = out.file.attrs
                     attrs["format"] = FORMAT
@@ -145,6 +152,9 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
                     attrs["totals"] = json.dumps(state["totals"])
                     attrs["schedules"] = json.dumps(schedules)
                     attrs["particles"] = sim.decomp.total
+                    if sets:  # the other point sets: name -> (points, fields)
+                        attrs["sets"] = json.dumps({name: [int(total), list(f)] for name, (_, total, f)
+                                                    in sets.items()})
                     if len(sim.offsets) > 2:  # the first global id of each body
                         attrs["bodies"] = json.dumps(sim.offsets.tolist())
         try:
@@ -202,7 +212,16 @@ def _read_block(path: str, comm) -> dict:
                 raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
             fields[field] = f[field][start:stop]
         attrs["bodies"] = f.attrs.get("bodies", "null")
-    return {"attrs": attrs, "fields": fields}
+        sets = {}
+        for name, (count, names) in json.loads(f.attrs.get("sets", "{}")).items():
+            start, stop = block_cuts(count, comm.size)[comm.rank: comm.rank + 2]
+            sets[name] = {"gid": np.arange(start, stop, dtype=np.int64)}
+            for field in names:
+                key = f"{name}/{field}"
+                if key not in f or len(f[key]) != count:
+                    raise ValueError(f"is incomplete (dataset '{key}' missing or short)")
+                sets[name][field] = f[key][start:stop]
+    return {"attrs": attrs, "fields": fields, "sets": sets}
 
 
 def read(path: str, comm) -> dict:
@@ -223,7 +242,7 @@ def read(path: str, comm) -> dict:
 
     _collective_check(comm, read_block)
     attrs = block[0]["attrs"]
-    data = {"path": path, "fields": block[0]["fields"], "scene": json.loads(attrs["scene"]),
+    data = {"path": path, "fields": block[0]["fields"], "sets": block[0]["sets"], "scene": json.loads(attrs["scene"]),
             "group_names": json.loads(attrs["groups"]), "offsets": json.loads(attrs["bodies"])}
     for key in ("clock", "totals", "schedules"):
         data[key] = json.loads(attrs[key])

@@ -59,14 +59,16 @@ def _smallest(c: np.ndarray, ids: np.ndarray, target: int, comm) -> np.ndarray:
     return (c < lo) | (tie & (ids < glo))
 
 
-def parallel_rcb(X: np.ndarray, gid: np.ndarray, comm) -> np.ndarray:
+def rcb(X: np.ndarray, gid: np.ndarray, comm) -> tuple[np.ndarray, list]:
     """Owner rank of each local particle: recursive bisection of all ranks' particles along
-    the longest axis of each part, computed together by all ranks.
+    the longest axis of each part, computed together by all ranks; and the cuts made, as
+    (first rank, left ranks, axis, plane) in order, for `assign`.
 
     Part counts are split as evenly as possible (any number of ranks); the result depends
     only on the global set (positions and ids), not on where the particles are held.
     """
     owner = np.zeros(len(X), np.int64)
+    cuts = []
     parts = [(0, comm.size)]
     while parts:
         halves = []
@@ -84,8 +86,28 @@ def parallel_rcb(X: np.ndarray, gid: np.ndarray, comm) -> np.ndarray:
             axis = int(np.argmax(hi - lo)) if total else 0
             keep = _smallest(pts[:, axis], gid[mine], int(round(total * left / count)), comm)
             owner[mine[~keep]] = first + left
+            c = pts[:, axis]
+            low = comm.allreduce(float(c[keep].max()) if keep.any() else -np.inf, op=MPI.MAX)
+            high = comm.allreduce(float(c[~keep].min()) if (~keep).any() else np.inf, op=MPI.MIN)
+            plane = 0.5 * (low + high) if np.isfinite(low) and np.isfinite(high) else min(low, high)
+            cuts.append((first, left, axis, plane))
             halves += [(first, left), (first + left, count - left)]
         parts = halves
+    return owner, cuts
+
+
+def parallel_rcb(X: np.ndarray, gid: np.ndarray, comm) -> np.ndarray:
+    """Owner rank of each local particle by `rcb`."""
+    return rcb(X, gid, comm)[0]
+
+
+def assign(cuts: list, Y: np.ndarray) -> np.ndarray:
+    """Owner rank of points at `Y` by the planes of an `rcb` of the particles: the rank whose
+    region holds the point (points on a plane go to the upper side)."""
+    owner = np.zeros(len(Y), np.int64)
+    for first, left, axis, plane in cuts:
+        sel = np.flatnonzero(owner == first)
+        owner[sel[Y[sel, axis] >= plane]] = first + left
     return owner
 
 
@@ -122,11 +144,13 @@ def partition(fields: dict, position: str, comm) -> dict:
     return migrate(fields, parallel_rcb(fields[position], fields["gid"], comm), comm)
 
 
-def nearby(fields: dict, x: np.ndarray, reach: float, comm) -> dict:
-    """The particles of other ranks (all arrays of `fields`, plus "owner") within `reach`
-    of this rank's bounding box of the positions `x` (rows of `fields`)."""
+def nearby(fields: dict, x: np.ndarray, reach: float, comm, region: np.ndarray | None = None) -> dict:
+    """The points of other ranks (all arrays of `fields`, plus "owner") within `reach` of
+    this rank's bounding box of the positions `region` (default `x`, the positions of the
+    rows of `fields`)."""
     n = len(x)
-    boxes = comm.allgather((x.min(axis=0), x.max(axis=0)) if n else None)
+    region = x if region is None else region
+    boxes = comm.allgather((region.min(axis=0), region.max(axis=0)) if len(region) else None)
     out = []
     for r, box in enumerate(boxes):
         if r == comm.rank or box is None or n == 0:
@@ -153,23 +177,25 @@ class LocalBody:
     total: int  # particles over all ranks
     fields: dict
     offsets: np.ndarray | None = None  # first global id of each body, then the total (None: one body)
+    sets: dict | None = None  # the other point sets (stress points, ...): name -> LocalBody
 
 
-def add_ghosts(owned: dict, position: str, comm) -> LocalBody:
+def add_ghosts(owned: dict, position: str, comm, also: np.ndarray | None = None) -> LocalBody:
     """This rank's owned particles `owned` (by gid) plus two ghost layers found across ranks:
     neighbours (within the largest kernel support, in the configuration `owned[position]`)
-    of owned particles, and neighbours of those. Each rank sends every other rank its
-    particles within two supports of that rank's bounding box."""
+    of owned particles and of the points at `also` (this rank's owned points of other sets,
+    whose neighbourhoods must be complete too), and neighbours of those. Each rank sends
+    every other rank its particles within two supports of that rank's bounding box."""
     n = len(owned["gid"])
     total = comm.allreduce(n)
     if comm.size == 1:
         return LocalBody(gid=owned["gid"], owner=np.zeros(n, np.int64), n_owned=n, n_ghost=0,
                          total=total, fields=owned)
-    x = owned[position]
+    x = owned[position] if also is None else np.concatenate([owned[position], also])
     reach = comm.allreduce(float(owned["support"].max()) if n else 0.0, op=MPI.MAX)
-    cand = nearby(owned, x, 2.0 * reach, comm)
+    cand = nearby(owned, owned[position], 2.0 * reach, comm, region=x)
     layer1 = layer2 = np.zeros(0, np.int64)
-    if n and len(cand["gid"]):
+    if len(x) and len(cand["gid"]):
         dist1, _ = cKDTree(x).query(cand[position], distance_upper_bound=reach)
         layer1 = np.flatnonzero(np.isfinite(dist1))
         rest = np.flatnonzero(~np.isfinite(dist1))
@@ -183,6 +209,44 @@ def add_ghosts(owned: dict, position: str, comm) -> LocalBody:
     fields = {k: np.concatenate([owned[k], ghosts[k]]) for k in owned}
     return LocalBody(gid=fields["gid"], owner=owner, n_owned=n, n_ghost=len(layer1), total=total,
                      fields=fields)
+
+
+def add_set_ghosts(owned: dict, position: str, particles: np.ndarray, reach: float, comm) -> LocalBody:
+    """This rank's owned points of another set (`owned`, by gid) plus, as ghosts, the points
+    of that set owned by other ranks within `reach` of this rank's particles at `particles`
+    (by owner rank, then gid): the integration points the owned particles' sums run over."""
+    n = len(owned["gid"])
+    total = comm.allreduce(n)
+    if comm.size == 1:
+        return LocalBody(gid=owned["gid"], owner=np.zeros(n, np.int64), n_owned=n, n_ghost=0,
+                         total=total, fields=owned)
+    cand = nearby(owned, owned[position], reach, comm, region=particles)
+    ghost = np.zeros(0, np.int64)
+    if len(particles) and len(cand["gid"]):
+        dist, _ = cKDTree(particles).query(cand[position], distance_upper_bound=reach)
+        ghost = np.flatnonzero(np.isfinite(dist))
+    ghost = ghost[np.lexsort((cand["gid"][ghost], cand["owner"][ghost]))]
+    ghosts = _take(cand, ghost)
+    owner = np.concatenate([np.full(n, comm.rank, np.int64), ghosts.pop("owner")])
+    fields = {k: np.concatenate([owned[k], ghosts[k]]) for k in owned}
+    return LocalBody(gid=fields["gid"], owner=owner, n_owned=n, n_ghost=len(ghost), total=total, fields=fields)
+
+
+def localize(fields: dict, sets: dict, position: str, comm) -> LocalBody:
+    """The particles `fields` (any block of them, by gid) sent to their owners by parallel
+    RCB of `fields[position]`, with their ghost layers; and each other point set of `sets`
+    (name -> a block of its points, by gid) sent to the owners of the regions holding its
+    points, with its ghosts (in `.sets`)."""
+    if not sets:
+        return add_ghosts(partition(fields, position, comm), position, comm)
+    owner, cuts = rcb(fields[position], fields["gid"], comm)
+    owned = migrate(fields, owner, comm)
+    others = {name: migrate(block, assign(cuts, block[position]), comm) for name, block in sets.items()}
+    also = np.concatenate([np.zeros((0, owned[position].shape[1]))] + [o[position] for o in others.values()])
+    local = add_ghosts(owned, position, comm, also=also)
+    reach = comm.allreduce(float(owned["support"].max()) if len(owned["gid"]) else 0.0, op=MPI.MAX)
+    local.sets = {name: add_set_ghosts(o, position, owned[position], reach, comm) for name, o in others.items()}
+    return local
 
 
 class Decomposition:
