@@ -14,6 +14,8 @@ import numpy as np
 
 from parsph import config, geometry
 from parsph.errors import InputError
+from parsph.formulations import galerkin
+from parsph.geometry.gauss_points import BoxGaussPoints
 from parsph.geometry.stress_points import BoxStressPoints
 from parsph.parallel.decomposition import LocalBody, block_cuts, localize, nearby, partition
 from parsph.parallel.runtime import collective, warn
@@ -176,28 +178,32 @@ def _thickness(scene: dict) -> float:
     return {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[scene["scene"]["dimension"]]
 
 
-def build_stress_points(scene: dict, comm) -> dict | None:
-    """This rank's block of the stress points of the scene's kbm bodies (formulations.kbm;
-    global ids body after body): "gid", "X", "volume" (quadrature weight), "body"; None if
-    no body uses them. Collective."""
+def build_integration_points(scene: dict, comm) -> dict:
+    """This rank's blocks of the point sets of integration points the scene's bodies need
+    (formulations.galerkin: stress points, Gauss points; global ids body after body):
+    "gid", "X", "volume" (quadrature weight), "body". Collective."""
     specs = config.bodies(scene)
-    if not any(b["formulation"]["type"] == "kbm" for b in specs):
-        return None
     dim = scene["scene"]["dimension"]
-    gens = [(b, BoxStressPoints(_generators(spec["parts"], "geometry.parts", dim)[0], _thickness(scene)))
-            for b, spec in enumerate(specs) if spec["formulation"]["type"] == "kbm"]
-    first = np.cumsum([0] + [g.count for _, g in gens])
-    start, stop = block_cuts(first[-1], comm.size)[comm.rank: comm.rank + 2]
-    X, volume, body = [np.zeros((0, dim))], [np.zeros(0)], [np.zeros(0, np.int64)]
-    for (b, g), offset in zip(gens, first):
-        lo, hi = max(start, offset), min(stop, offset + g.count)
-        if lo < hi:
-            x, w = g.rows(lo - offset, hi - offset)
-            X.append(x)
-            volume.append(w)
-            body.append(np.full(hi - lo, b, np.int64))
-    return {"gid": np.arange(start, stop, dtype=np.int64), "X": np.concatenate(X),
-            "volume": np.concatenate(volume), "body": np.concatenate(body)}
+    kinds = {galerkin.STRESS_POINTS: BoxStressPoints, galerkin.GAUSS_POINTS: BoxGaussPoints}
+    out = {}
+    for name, kind in kinds.items():
+        gens = [(b, kind(_generators(spec["parts"], "geometry.parts", dim)[0], _thickness(scene)))
+                for b, spec in enumerate(specs) if galerkin.integration_set(spec["formulation"]) == name]
+        if not gens:
+            continue
+        first = np.cumsum([0] + [g.count for _, g in gens])
+        start, stop = block_cuts(first[-1], comm.size)[comm.rank: comm.rank + 2]
+        X, volume, body = [np.zeros((0, dim))], [np.zeros(0)], [np.zeros(0, np.int64)]
+        for (b, g), offset in zip(gens, first):
+            lo, hi = max(start, offset), min(stop, offset + g.count)
+            if lo < hi:
+                x, w = g.rows(lo - offset, hi - offset)
+                X.append(x)
+                volume.append(w)
+                body.append(np.full(hi - lo, b, np.int64))
+        out[name] = {"gid": np.arange(start, stop, dtype=np.int64), "X": np.concatenate(X),
+                     "volume": np.concatenate(volume), "body": np.concatenate(body)}
+    return out
 
 
 def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
@@ -255,7 +261,6 @@ def build_local(scene: dict, comm) -> LocalBody:
     """This rank's particles of `scene` with their ghost layers (and the other point sets,
     if any), ready for the simulation."""
     owned, offsets = build_bodies(scene, comm)
-    stress = build_stress_points(scene, comm)
-    local = localize(owned, {} if stress is None else {"stress_points": stress}, "X", comm)
+    local = localize(owned, build_integration_points(scene, comm), "X", comm)
     local.offsets = offsets
     return local

@@ -66,7 +66,7 @@ def in_range(lo, hi, lo_open=False, hi_open=False):
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = tuple(LAWS)
-FORMULATIONS = ("tlsph", "ulsph", "sph", "rlm", "kbm")
+FORMULATIONS = ("tlsph", "ulsph", "sph", "rlm", "kbm", "efg")
 
 
 def snapshot_fields(v):
@@ -113,7 +113,11 @@ SECTIONS: dict[str, dict[str, Key]] = {
                     "tlsph: corrected SPH, total-Lagrangian [G]; ulsph: the same from an updated "
                     "reference [V §3.1]; sph: symmetrised SPH; rlm: Randles-Libersky normalisation "
                     "[R Table 1] (Lagrangian kernel, nodal integration); kbm: Krongauz-Belytschko "
-                    "corrected gradients with stress points [R §5.2] (box parts)"),
+                    "corrected gradients with stress points [R §5.2] (a box); efg: element-free "
+                    "Galerkin, MLS with a linear basis [R §4.4]"),
+        "integration": Key("str", "nodal", one_of("nodal", "cells"),
+                           "efg: at the particles (nodal) or at the Gauss points of background cells "
+                           "[R §5.3] (cells: a box)"),
         "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
         "hessian_correction": Key("str", "weighted", one_of("weighted", "paper"),
                                   "linear correction of the kernel Hessian: weighted: the A term "
@@ -579,12 +583,14 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
                          f"(steps) or {path}.update_strain (log strain)")
     if form["type"] != "ulsph" and (form["update_every"] or form["update_strain"]):
         raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
-    if form["type"] in ("sph", "rlm", "kbm") and form["force_form"] != "pair":
+    if form["type"] in ("sph", "rlm", "kbm", "efg") and form["force_form"] != "pair":
         raise InputError(f"{path}.force_form applies to tlsph and ulsph; {form['type']} has its own force row")
-    if form["type"] == "kbm" and form["hourglass"] > 0:
-        raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm; kbm's stress points "
-                         "stabilise it (give 0 or leave it out)")
-    if form["type"] in ("sph", "rlm", "kbm") and form["hessian"] > 0:
+    if form["type"] in ("kbm", "efg") and form["hourglass"] > 0:
+        raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {form['type']} "
+                         "(give 0 or leave it out)")
+    if form["type"] != "efg" and form["integration"] != "nodal":
+        raise InputError(f"{path}.integration applies to type = 'efg'")
+    if form["type"] in ("sph", "rlm", "kbm", "efg") and form["hessian"] > 0:
         raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
                          f"not to {form['type']}")
     return form
@@ -680,21 +686,25 @@ def validate(raw: dict) -> dict:
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
             "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
     for b, body in enumerate(bodies(scene)):
-        if body["formulation"]["type"] == "kbm":
-            _check_stress_point_parts(body, "bodies[{b}]".format(b=b) if multi else "geometry", scene)
+        if body["formulation"]["type"] in ("kbm", "efg"):
+            _check_integration_points(body, f"bodies[{b}]" if multi else "geometry", scene)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 
 
-def _check_stress_point_parts(body: dict, where: str, scene: dict) -> None:
-    """kbm places its stress points in the cells of a box lattice (geometry.stress_points)."""
+def _check_integration_points(body: dict, where: str, scene: dict) -> None:
+    """kbm places its stress points in the cells of a box lattice (geometry.stress_points),
+    efg with cell integration its Gauss points in cells over one (geometry.gauss_points)."""
+    form = body["formulation"]
     parts = body["parts"]
-    if len(parts) != 1 or parts[0]["shape"] != "box" or parts[0]["placement"] != "cell":
-        raise InputError(f"formulation.type = 'kbm' places stress points in the cells of one box lattice: "
+    what = {"kbm": "stress points in the cells of", "efg": "Gauss points in background cells over"}[form["type"]]
+    if (form["type"] == "kbm" or form["integration"] == "cells") and (
+            len(parts) != 1 or parts[0]["shape"] != "box" or parts[0]["placement"] != "cell"):
+        raise InputError(f"formulation.type = '{form['type']}' places {what} one box lattice: "
                          f"{where}.parts must be a single box with placement = 'cell'")
     if scene["symmetry"]:
-        raise InputError("[[symmetry]] planes cannot be used with formulation.type = 'kbm' (stress points have "
-                         "no mirror images); model the whole body")
+        raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' (its "
+                         "shape functions and integration points have no mirror images); model the whole body")
 
 
 def parse_override(text: str) -> tuple[list[str | int], Any]:

@@ -13,7 +13,9 @@ body's owned particles are a contiguous run of rows); each body has its material
 formulation, and particles of different bodies are not neighbours. The particles are a
 point set (parsph.points): which arrays a particle carries, migrates, checkpoints and
 mirrors comes from the field registry (parsph.fields), and ghost values are refreshed by
-name, as the stages' declarations require.
+name, as the stages' declarations require. The integration points of the Galerkin methods
+(stress points, Gauss points: formulations.galerkin) are point sets of their own, `sets`,
+with their owners, ghosts and checkpoint rows.
 Local arrays hold the rank's owned particles first, then its ghosts. Sums over particles
 (energies, the work accumulated step by step, obstacle forces) are exact (exact_sum), so
 that the history, like the particle state, is the same bit for bit on any number of ranks.
@@ -33,7 +35,7 @@ from parsph.bc import BoundaryConditions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, total
-from parsph.formulations import kbm, reference, tlsph
+from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
 from parsph.materials.elastic import first_piola_stresses
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
@@ -58,10 +60,10 @@ class Body:
         self.first, self.last = first, last
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
-        kind = kbm.StressPointFormulation if spec["formulation"]["type"] == "kbm" else NodalFormulation
+        kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
         self.formulation = kind(spec["formulation"], dim, self.law.law_id)
         self.lo = self.hi = 0
-        self.stress_rows = (0, 0)  # its owned rows of the stress points (kbm)
+        self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
         self.stages = []
 
 
@@ -184,47 +186,47 @@ class Simulation:
         if self.updated:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
-        self.stress_points = None
-        if any(b.formulation.type == "kbm" for b in self.bodies):
-            self._adopt_stress_points(local.sets[kbm.SET], keep)
+        self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
+        if any(b.formulation.type in galerkin.TYPES for b in self.bodies):
+            with collective(self.comm):
+                for b in self.bodies:
+                    if b.formulation.type in galerkin.TYPES:
+                        b.formulation.build(self, b, self.scene["kernel"]["type"])
         self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 
-    def _adopt_stress_points(self, local: LocalBody, keep: int) -> None:
-        """The stress points (formulations.kbm): owned, then ghosts (within the kernel
-        support of an owned particle), their carried fields, work arrays and halo plan; then
-        the kbm relations and coefficients."""
+    def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
+        """Another point set (stress points, Gauss points: formulations.galerkin): owned
+        points, then ghosts (within the kernel support of an owned particle), the fields it
+        carries, work arrays and halo plan; each body's rows of it."""
         dim, fl = self.dim, local.fields
         rows = local.n_owned + local.n_ghost
-        carried = fields.carried({b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies},
-                                 kbm.SET)
-        arrays = {name: self._initial(name, fl, rows, kbm.SET) for name in carried}
+        carried = fields.carried({b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies}, name)
+        arrays = {field: self._initial(field, fl, rows, name) for field in carried}
         arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
-                      psi=np.zeros(rows), shepard=np.zeros(rows), shepard_grad=np.zeros((rows, dim)))
-        self.stress_points = PointSet(kbm.SET, arrays["gid"], local.n_owned, Decomposition(local, self.comm),
-                                      carried, arrays)
-        self.particles.arrays.update(shepard=np.zeros(keep), shepard_grad=np.zeros((keep, dim)))
+                      psi=np.zeros(rows))
         body = arrays["body"][: local.n_owned]
         for b in self.bodies:
-            b.stress_rows = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
-        with collective(self.comm):
-            self.stress_point_data = kbm.build_reference(self, self.scene["kernel"]["type"])
+            b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
+        return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, self.comm), carried, arrays)
 
-    def unstable_stress_point(self, q: int) -> ParsphError:
-        """The error for owned stress point q, inverted or with a stress that is not finite."""
-        sp = self.stress_points.arrays
-        where = ", ".join(f"{c:.6g}" for c in sp["X"][q])
+    def unstable_point(self, points: str, q: int) -> ParsphError:
+        """The error for owned point q of set `points`, inverted or with a stress that is
+        not finite."""
+        A = self.sets[points].arrays
+        where = ", ".join(f"{c:.6g}" for c in A["X"][q])
+        what = points[:-1].replace("_", " ")
         return ParsphError(
-            f"stress point {int(sp['gid'][q])} at reference ({where}) is inverted or its stress is not finite "
-            f"(J = {sp['J'][q]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
+            f"{what} {int(A['gid'][q])} at reference ({where}) is inverted or its stress is not finite "
+            f"(J = {A['J'][q]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
             f"unstable: {self._advice()}")
 
     def point_sets(self) -> list:
-        """The rank's point sets: the particles, then the stress points (if any)."""
-        return [self.particles] + ([self.stress_points] if self.stress_points is not None else [])
+        """The rank's point sets: the particles, then the others (stress points, Gauss points)."""
+        return [self.particles] + list(self.sets.values())
 
     def _refresh(self, names) -> None:
         """Refresh the ghost values of the named arrays: "NAME" of the particles, "SET.NAME"
@@ -544,7 +546,7 @@ class Simulation:
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            if b.formulation.type == "kbm":  # the particles' and stress points' quadrature weights
+            if b.formulation.type in galerkin.TYPES:  # over its integration points
                 out["strain"].append(total(b.formulation.strain_energy_terms(self, b)))
             else:
                 out["strain"].append(total(self.volume[lo:hi] * self.psi[lo:hi]))

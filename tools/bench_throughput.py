@@ -6,8 +6,8 @@ spacing as in MACHDYN examples), stepped from a small random velocity field, in 
 formulations: total-Lagrangian with hourglass control off and on (alpha = 50, both forms),
 with Hessian's-difference stabilisation (eta = 1), updated-Lagrangian with eta = 1 and
 the reference updated every 3 steps (the paper's stress setting) or every 30, and [R]'s
-symmetrised SPH, RLM and KBM with stress points (µs per particle-step counts particles
-only, as [R] Tables 5-6 do). Each updated row also gives the time of one reference update per
+symmetrised SPH, RLM, KBM with stress points and EFG with nodal and cell integration
+(µs per particle-step counts particles only, as [R] Tables 5-6 do). Each updated row also gives the time of one reference update per
 particle. Compile time and set-up are
 excluded; each case is timed over --steps steps after a warm-up. Prints a table and writes
 it as JSON.
@@ -45,7 +45,8 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
         "material": {"model": "saint_venant_kirchhoff", "density": 1000.0, "youngs_modulus": 1e9,
                      "poisson_ratio": 0.3},
         "formulation": {"hourglass": alpha, "hourglass_form": form, "hessian": eta,
-                        "type": "ulsph" if every else method, "update_every": every},
+                        "type": "ulsph" if every else method.removesuffix("_cells"), "update_every": every,
+                        "integration": "cells" if method.endswith("_cells") else "nodal"},
         "time": {"end": 1.0},
     }
     return config.validate(raw)
@@ -65,7 +66,7 @@ def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"
     n = sim.n_owned
     pairs = int(sim.ref.ptr[-1])
     update = sim.stage_seconds.get("reference update", 0.0) / max(sim.updates, 1)
-    return {"method": scene["formulation"]["type"], "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
+    return {"method": method, "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
             "hourglass_form": form if alpha > 0 else "-", "eta": eta, "update_every": every,
             "steps": steps, "us_per_particle_step": 1e6 * seconds / (steps * n),
             "us_per_particle_update": 1e6 * update / n}
@@ -76,7 +77,8 @@ CASES = (("tlsph", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0)
          ("tlsph", 50.0, "variational", 0.0, 0), ("tlsph", 0.0, "variational", 1.0, 0),
          ("tlsph", 0.0, "variational", 1.0, 3), ("tlsph", 0.0, "variational", 1.0, 30),
          ("sph", 0.0, "variational", 0.0, 0), ("rlm", 0.0, "variational", 0.0, 0),
-         ("kbm", 0.0, "variational", 0.0, 0))
+         ("kbm", 0.0, "variational", 0.0, 0), ("efg", 0.0, "variational", 0.0, 0),
+         ("efg_cells", 0.0, "variational", 0.0, 0))
 
 
 def main():
@@ -91,7 +93,8 @@ def main():
         for method, alpha, form, eta, every in CASES:
             rows.append(measure(dim, count, alpha, form, args.steps, eta, every, method))
             r = rows[-1]
-            kind = f"UL every {every:2d}" if every else {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM"}[method].ljust(11)
+            kind = f"UL every {every:2d}" if every else {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM", "efg": "EFG nodal",
+                                                              "efg_cells": "EFG cells"}[method].ljust(11)
             print(f"{r['dim']}D  {r['particles']:7d} particles  {r['neighbours']:5.1f} neighbours  {kind} "
                   f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s} eta {eta:3.1f}  "
                   f"{r['us_per_particle_step']:.3f} us/particle-step"

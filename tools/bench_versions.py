@@ -67,7 +67,8 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float, every: 
         "material": {"model": "saint_venant_kirchhoff", "density": 1000.0, "youngs_modulus": 1e9,
                      "poisson_ratio": 0.3},
         "formulation": {"hourglass": alpha, "hourglass_form": form, "hessian": eta,
-                        "type": "ulsph" if every else method, "update_every": every},
+                        "type": "ulsph" if every else method.removesuffix("_cells"), "update_every": every,
+                        **({"integration": "cells"} if method.endswith("_cells") else {})},
         "time": {"end": 1.0},
     }
 

@@ -1,0 +1,365 @@
+"""Meshfree Galerkin methods with a Lagrangian kernel: F and the stress at integration
+points, forces from test-function gradients [R §4.3-5.3; eq. 26-32, 37-43, 60, 63-69;
+implementation forms: DATA_SHEET §A].
+
+  kbm          Krongauz-Belytschko: trial gradients G_J = A^-T grad W^S_J corrected from
+               the Shepard functions W^S_J = W_J / S, S = sum_K W_K [R eq. 28-32]; Shepard
+               test functions (Petrov-Galerkin [R eq. 64]); integration points: particles
+               and stress points, weights the Voronoi volumes of both together [R eq. 65]
+  efg nodal    element-free Galerkin: MLS shape functions with a linear basis [R eq. 37-42]
+               as trial and test functions (Bubnov-Galerkin), the particles as integration
+               points with their volumes [R eq. 60]
+  efg cells    the same at the Gauss points of background cells [R eq. 66-69]
+
+At each integration point q, from the particles J whose kernel covers it (|X_q - X_J| < h_J,
+the particle itself included):
+
+    F_q = I + sum_J (u_J - u_b) (x) G_J(X_q),    f_I = - sum_q w_q P(X_q) grad N_I(X_q)
+
+with G the trial and N the test functions, u_b the displacement of the point itself (a
+particle) or of its first particle (sum_J G_J = 0 to round-off: a rigid translation gives
+F = I exactly). F and the stress are evaluated at the particles in every method (the time
+step and the read-outs use them). The test gradient of particle I at a point q needs sums
+over q's whole neighbourhood (S, grad S; or the MLS moment matrix and its gradient): the
+owner of q computes them and they are copied to q's ghosts once. sum_I grad N_I = 0 at every
+q, so linear momentum is conserved; the sums run over particles, then the other set, each
+in global-id order.
+
+MLS gradient (DATA_SHEET §A), with the basis centred at X_q and scaled by a length l of q,
+p_J = (1, (X_J - X_q) / l), M = sum_J W_J p_J p_J^T, gamma = M^-1 e_0:
+    d_a Phi_J = (M^-1 p_J)_(1+a) W_J / l - gamma . (d_a M) M^-1 p_J W_J + (gamma . p_J) d_a W_J.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from parsph.errors import InputError
+from parsph.fields import Field, register
+from parsph.formulations.base import Stage, source_hash
+from parsph.formulations.reference import PairOptions
+from parsph.kernels.correction import MAX_CONDITION
+from parsph.kernels.functions import evaluate
+from parsph.materials import elastic, update
+from parsph.materials.elastic import det
+from parsph.relations import within_support
+
+STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
+TYPES = ("kbm", "efg")
+
+register(Field("weight", "scalar", owner="kbm", doc="quadrature weight among particles and stress points [m^3]"))
+for _set in (STRESS_POINTS, GAUSS_POINTS):
+    register(
+        Field("gid", "id", points=_set, doc="global id"),
+        Field("X", "point", points=_set, doc="reference position [m]"),
+        Field("volume", "scalar", points=_set, doc="quadrature weight [m^3]"),
+        Field("body", "id", points=_set, doc="index of the body"),
+    )
+
+
+def integration_set(formulation: dict) -> str | None:
+    """The point set of integration points a formulation table needs besides the particles."""
+    if formulation["type"] == "kbm":
+        return STRESS_POINTS
+    if formulation["type"] == "efg" and formulation["integration"] == "cells":
+        return GAUSS_POINTS
+    return None
+
+
+# ------------------------------------------------------------------ shape functions
+def _kernel_pairs(relation, x_eval, x_node, support, kernel, node_of_pair, eval_of_pair):
+    """Per pair: W_J(X_q) and its gradient with respect to X_q, J = node, q = evaluation point."""
+    dim = x_eval.shape[1]
+    sep = x_eval[eval_of_pair] - x_node[node_of_pair]
+    dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
+    w, dwdr, _ = evaluate(kernel, dist, support[node_of_pair], dim)
+    scale = np.divide(dwdr, dist, out=np.zeros_like(dist), where=dist > 0)
+    return w, scale[:, None] * sep, sep
+
+
+def _refuse(bad, condition, counts, x_rows, gid_rows, matrix, what):
+    first = int(np.flatnonzero(bad)[0])
+    where = ", ".join(f"{c:.6g}" for c in x_rows[first])
+    raise InputError(
+        f"the {matrix} of {what} {int(gid_rows[first])} at ({where}) is singular or ill-conditioned "
+        f"(condition number {condition[first]:.3g}, {int(counts[first])} particles in reach); "
+        f"{int(bad.sum())} point(s) affected. Increase kernel.support")
+
+
+def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, active, what):
+    """(G per pair of `relation` from integration points to particles, per-row data the
+    test gradients need): shape "kbm" (row data S, grad S) or "mls" (M^-1, grad M). Rows
+    not `active` get the identity; an active row with no particle or a singular matrix
+    raises InputError naming it."""
+    dim = x_rows.shape[1]
+    n = len(relation.ptr) - 1
+    row, j = relation.row_of_pair(), relation.idx
+    counts = np.diff(relation.ptr)
+    empty = active & (counts == 0)
+    if empty.any():
+        first = int(np.flatnonzero(empty)[0])
+        where = ", ".join(f"{c:.6g}" for c in x_rows[first])
+        raise InputError(f"{what} {int(gid_rows[first])} at ({where}) lies in no particle's kernel support; "
+                         "increase kernel.support")
+    w, grad, _ = _kernel_pairs(relation, x_rows, x_cols, support, kernel, j, row)
+    if shape == "kbm":
+        S = np.bincount(row, w, n)
+        dS = np.stack([np.bincount(row, grad[:, a], n) for a in range(dim)], axis=1)
+        S[~active] = 1.0
+        gws = (grad - (w / S[row])[:, None] * dS[row]) / S[row][:, None]
+        A = np.zeros((n, dim, dim))
+        np.add.at(A, row, np.einsum("pa,pb->pab", x_cols[j] - x_rows[row], gws))
+        A[~active] = np.eye(dim)
+        condition = np.linalg.cond(A) if n else np.zeros(0)
+        bad = active & ~(condition < MAX_CONDITION)
+        if bad.any():
+            _refuse(bad, condition, counts, x_rows, gid_rows, "correction matrix A", what)
+        Ainv = np.linalg.inv(A) if n else A
+        G = np.einsum("pba,pb->pa", Ainv[row], gws)
+        return np.ascontiguousarray(G), np.column_stack([S, dS])
+    m = dim + 1
+    # the basis scaled by a length of the row (the support of its first particle) keeps M
+    # well conditioned at any size; the shape functions do not depend on it
+    scale = np.ones(n)
+    has = counts > 0
+    scale[has] = support[j[relation.ptr[:-1][has]]]
+    p = np.concatenate([np.ones((len(j), 1)), (x_cols[j] - x_rows[row]) / scale[row, None]], axis=1)
+    M = np.zeros((n, m, m))
+    np.add.at(M, row, w[:, None, None] * np.einsum("pa,pb->pab", p, p))
+    dM = np.zeros((n, dim, m, m))
+    np.add.at(dM, row, grad[:, :, None, None] * np.einsum("pa,pb->pab", p, p)[:, None])
+    M[~active] = np.eye(m)
+    condition = np.linalg.cond(M) if n else np.zeros(0)
+    bad = active & ~(condition < MAX_CONDITION)
+    if bad.any():
+        _refuse(bad, condition, counts, x_rows, gid_rows, "moment matrix M", what)
+    Minv = np.linalg.inv(M) if n else M
+    data = np.concatenate([scale[:, None], Minv.reshape(n, -1), dM.reshape(n, -1)], axis=1)
+    return _mls_gradients(p, w, grad, data[row], dim), data
+
+
+def _mls_gradients(p, w, grad, data, dim):
+    """d Phi_J(X_q) per pair from p_J = (1, (X_J - X_q) / l), W_J(X_q), grad W_J(X_q) and
+    the row data (l, M^-1, grad M) of its point q (see the module docstring)."""
+    m = dim + 1
+    scale = data[:, 0]
+    Minv = data[:, 1: 1 + m * m].reshape(-1, m, m)
+    dM = data[:, 1 + m * m:].reshape(-1, dim, m, m)
+    gamma = Minv[:, :, 0]
+    Mp = np.einsum("pab,pb->pa", Minv, p)
+    first = Mp[:, 1:] * (w / scale)[:, None]
+    second = np.einsum("pa,pkab,pb->pk", gamma, dM, Mp) * w[:, None]
+    third = np.einsum("pa,pa->p", gamma, p)[:, None] * grad
+    return np.ascontiguousarray(first - second + third)
+
+
+def test_function_gradients(shape, relation, x_rows, x_cols, data, support, kernel):
+    """grad N_I(X_q) per pair of `relation` from particles I to integration points q, from
+    the row data of q (trial_gradients)."""
+    dim = x_rows.shape[1]
+    row, q = relation.row_of_pair(), relation.idx
+    w, grad, sep = _kernel_pairs(relation, x_cols, x_rows, support, kernel, row, q)
+    if shape == "kbm":
+        S, dS = data[q, 0], data[q, 1:]
+        return np.ascontiguousarray((grad - (w / S)[:, None] * dS) / S[:, None])
+    p = np.concatenate([np.ones((len(q), 1)), -sep / data[q, :1]], axis=1)  # (1, (X_I - X_q) / l)
+    return _mls_gradients(p, w, grad, data[q], dim)
+
+
+# ------------------------------------------------------------------ the formulation
+@dataclass
+class Coupling:
+    """The relations of one set of integration points with the particles of one body, in
+    local rows, and their per-pair coefficients."""
+
+    points: str  # "particles" or the set's name
+    ptr: np.ndarray  # owned integration points -> particles: trial gradients
+    idx: np.ndarray
+    G: np.ndarray
+    base: np.ndarray  # the particle whose displacement is subtracted
+    test_ptr: np.ndarray  # owned particles -> integration points (owned and ghosts): test gradients
+    test_idx: np.ndarray
+    test_g: np.ndarray
+    integrates: bool  # False: the particles of efg cells carry F and stress as read-outs only
+
+
+class GalerkinFormulation:
+    """One body's Galerkin formulation: shape functions, integration points, compiled
+    stages, strain energy."""
+
+    updated = False  # what the loop asks of every formulation: no updated reference,
+    eta = 0.0  # no Hessian stabilisation, no hourglass control
+    hourglass_form = 0
+    weighted_hessian = True
+    update_every = update_strain = 0
+
+    def __init__(self, options: dict, dim: int, law: int):
+        self.type = options["type"]
+        self.shape = "kbm" if self.type == "kbm" else "mls"
+        self.points = integration_set(options)  # the other set, if any
+        self.kinematics_stress, self.forces = compile_stages(dim, law)
+        self.couplings = []
+
+    @property
+    def pair_options(self) -> PairOptions:
+        """The nodal pair data every particle has (nearest spacing for the time step, disorder)."""
+        return PairOptions(corrected=True, hourglass_form=0, alpha=0.0)
+
+    def build(self, sim, body, kernel: str) -> None:
+        """The relations and coefficients of `body` in the reference configuration (once:
+        the kernel is Lagrangian); the row data of the ghost integration points is copied
+        from their owners."""
+        P = sim.particles.arrays
+        n = sim.n_owned
+        X, support, gid = P["X"], P["support"], P["gid"]
+        mine = sim.body == body.index
+        group_rows = np.where(mine, 0, -1)
+        group_cols = np.where(mine, 0, -2)
+        sets = [("particles", sim.particles)] + ([(self.points, sim.sets[self.points])] if self.points else [])
+        self.couplings = []
+        for name, points in sets:
+            A = points.arrays
+            rows = len(A["gid"])
+            active = (A["body"] == body.index) if name != "particles" else mine
+            key = f"{self.shape}_data"
+            trial = within_support(name, "particles", A["X"][: points.n_owned], X, gid, support, "cols",
+                                   np.where(active, 0, -1)[: points.n_owned], group_cols)
+            G, data = trial_gradients(self.shape, trial, A["X"][: points.n_owned], X, support, kernel, A["gid"],
+                                      active[: points.n_owned], "particle" if name == "particles" else
+                                      name[:-1].replace("_", " "))
+            if key not in A:
+                A[key] = np.zeros((rows,) + data.shape[1:])
+            rows_of_body = np.flatnonzero(active[: points.n_owned])
+            A[key][rows_of_body] = data[rows_of_body]
+            points.refresh(key)
+            test = within_support("particles", name, X[:n], A["X"], A["gid"], support, "rows", group_rows[:n],
+                                  np.where(active, 0, -2))
+            if name == "particles":
+                base = np.arange(points.n_owned, dtype=np.int64)
+            else:  # a point's first particle (rows of other bodies, never run, take any)
+                base = trial.idx[np.minimum(trial.ptr[:-1], len(trial.idx) - 1)] if len(trial.idx) else \
+                    np.zeros(points.n_owned, np.int64)
+            integrates = name != "particles" or self.type == "kbm" or self.points is None
+            self.couplings.append(Coupling(
+                name, trial.ptr, trial.idx, G, base, test.ptr, test.idx,
+                test_function_gradients(self.shape, test, X[:n], A["X"], A[key], support, kernel), integrates))
+
+    def weights(self, sim, points: str) -> np.ndarray:
+        """Quadrature weights of the integration points of set `points` (zeros: read-out only)."""
+        if points != "particles":
+            return sim.sets[points].arrays["volume"]
+        if self.type == "kbm":
+            return sim.particles.arrays["weight"]
+        return sim.volume if self.points is None else np.zeros(len(sim.volume))
+
+    def stages(self, sim, body) -> list:
+        c = body.constants.values
+        runs = []
+        for coupling in self.couplings:
+            if coupling.points == "particles":
+                arrays, (lo, hi), fail = dict(F=sim.F, VP=sim.VP, J=sim.J, psi=sim.psi), (body.lo, body.hi), \
+                    sim.unstable_particle
+            else:
+                arrays, (lo, hi) = sim.sets[coupling.points].arrays, body.set_rows[coupling.points]
+                fail = (lambda q, name=coupling.points: sim.unstable_point(name, q))
+            runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points)))
+
+        def kinematics_stress():
+            for coupling, arrays, lo, hi, fail, weight in runs:
+                bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.d,
+                                             weight, c, sim.no_state, arrays["F"], arrays["VP"], arrays["J"],
+                                             arrays["psi"])
+                if bad >= 0:
+                    raise fail(bad)
+
+        def forces():
+            sim.f_int[body.lo:body.hi] = 0.0
+            for coupling, arrays, _, _, _, _ in runs:
+                if coupling.integrates:
+                    self.forces(body.lo, body.hi, coupling.test_ptr, coupling.test_idx, coupling.test_g,
+                                arrays["VP"], sim.f_int)
+
+        prefix = f"{self.points}." if self.points else ""
+        written = ("F", "VP", "J", "psi") + tuple(prefix + k for k in ("F", "VP", "J", "psi") if prefix)
+        reads = tuple(("VP",) if self.points is None or self.type == "kbm" else ()) + \
+            ((prefix + "VP",) if prefix else ())
+        return [Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
+                Stage("forces", forces, reads=reads, writes=("f_int",))]
+
+    def strain_energy_terms(self, sim, body) -> np.ndarray:
+        """w_q psi_q over the body's owned integration points."""
+        terms = []
+        for coupling in self.couplings:
+            if not coupling.integrates:
+                continue
+            weight = self.weights(sim, coupling.points)
+            if coupling.points == "particles":
+                terms.append(weight[body.lo:body.hi] * sim.psi[body.lo:body.hi])
+            else:
+                lo, hi = body.set_rows[coupling.points]
+                terms.append(weight[lo:hi] * sim.sets[coupling.points].arrays["psi"][lo:hi])
+        return np.concatenate(terms)
+
+
+# ------------------------------------------------------------------ compiled stages
+_SOURCE_HASH = source_hash(__file__, elastic.__file__, update.__file__)
+
+
+def compile_stages(dim: int, law: int):
+    """(kinematics_stress, forces) for one body's dimension and material law."""
+    source = _SOURCE_HASH
+
+    @njit(cache=True)
+    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP, J, psi):
+        """F, stress, w P, J and psi at integration points lo..hi-1; returns the first
+        inverted point or -1."""
+        source  # noqa: B018 - keys the disk cache to the source text
+        return _kinematics(dim, law, lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP, J, psi)
+
+    @njit(cache=True)
+    def forces(lo, hi, ptr, idx, g, VP, f_int):
+        """f_I -= sum_q w_q P_q grad N_I(X_q) over one set of integration points, for
+        particles lo..hi-1."""
+        source  # noqa: B018 - keys the disk cache to the source text
+        for i in range(lo, hi):
+            for p in range(ptr[i], ptr[i + 1]):
+                q = idx[p]
+                for a in range(dim):
+                    s = 0.0
+                    for b in range(dim):
+                        s += VP[q, a, b] * g[p, b]
+                    f_int[i, a] -= s
+
+    return kinematics_stress, forces
+
+
+@njit(cache=True, inline="always")
+def _kinematics(dim, law, lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP, J, psi):
+    P = np.empty((dim, dim))
+    S = np.empty((dim, dim))
+    C = np.empty((dim, dim))
+    Cinv = np.empty((dim, dim))
+    first_bad = -1
+    for q in range(lo, hi):
+        b0 = base[q]
+        for a in range(dim):
+            for b in range(dim):
+                F[q, a, b] = 1.0 if a == b else 0.0
+        for p in range(ptr[q], ptr[q + 1]):
+            j = idx[p]
+            for a in range(dim):
+                dd = d[j, a] - d[b0, a]
+                for b in range(dim):
+                    F[q, a, b] += dd * G[p, b]
+        e = update.update(law, F[q], dim, c, state, q, P, S, C, Cinv)
+        J[q] = det(F[q], dim)
+        if not (np.isfinite(e) and J[q] > 0.0) and first_bad < 0:
+            first_bad = q
+        psi[q] = e
+        for a in range(dim):
+            for b in range(dim):
+                VP[q, a, b] = weight[q] * P[a, b]
+    return first_bad
