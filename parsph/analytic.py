@@ -40,3 +40,28 @@ def free_rod_velocity(x, t, length, wave_speed, initial):
 
     x = np.asarray(x, dtype=float)
     return 0.5 * (extended(x - wave_speed * t) + extended(x + wave_speed * t))
+
+
+def timoshenko_cantilever(X, length, depth, youngs, poisson, load, plane_strain=True):
+    """Displacement (n, 2) and small strain (n, 2, 2) of Timoshenko & Goodier's cantilever
+    on [0, L] x [-D/2, D/2] (unit thickness) clamped at x = 0 as the solution prescribes and
+    loaded at x = L by the parabolic shear traction t_y = P / (2 I) (D^2/4 - y^2), total P:
+        u_x = -P y / (6 E I) [(6L - 3x) x + (2 + nu)(y^2 - D^2/4)]
+        u_y =  P / (6 E I) [3 nu y^2 (L - x) + (4 + 5 nu) D^2 x / 4 + (3L - x) x^2]
+    (plane stress; in plane strain with E / (1 - nu^2) and nu / (1 - nu)), I = D^3 / 12."""
+    X = np.asarray(X, dtype=float)
+    E, nu = (youngs / (1 - poisson ** 2), poisson / (1 - poisson)) if plane_strain else (youngs, poisson)
+    x, y = X[:, 0], X[:, 1]
+    L, D, P = length, depth, load
+    inertia = D ** 3 / 12.0
+    c = P / (6.0 * E * inertia)
+    u = np.column_stack([-c * y * ((6 * L - 3 * x) * x + (2 + nu) * (y ** 2 - D ** 2 / 4)),
+                         c * (3 * nu * y ** 2 * (L - x) + (4 + 5 * nu) * D ** 2 * x / 4 + (3 * L - x) * x ** 2)])
+    # strains of the stresses sigma_xx = -P (L - x) y / I, sigma_yy = 0, sigma_xy = P (D^2/4 - y^2) / (2 I)
+    sxx = -P * (L - x) * y / inertia
+    sxy = P * (D ** 2 / 4 - y ** 2) / (2 * inertia)
+    strain = np.zeros((len(X), 2, 2))
+    strain[:, 0, 0] = sxx / E
+    strain[:, 1, 1] = -nu * sxx / E
+    strain[:, 0, 1] = strain[:, 1, 0] = (1 + nu) / E * sxy
+    return u, strain

@@ -5,8 +5,12 @@ Boundary conditions constrain chosen components of a group's motion:
   velocity      v(t) = value * min(t / ramp, 1)            (u follows by integration)
   displacement  u(t) = value * s(t / ramp), s(x) = x - sin(2 pi x) / (2 pi) for x < 1, else 1
                 (smooth start and stop: zero velocity at both ends of the ramp)
-The constrained components are excluded from the free update; the force the constraint
-exerts (the reaction) is minus the sum of the other forces on those components.
+The value is one vector for the group, or each particle's from expressions of its reference
+position (`expression`, parsph.expressions). The constrained components are excluded from
+the free update; the force the constraint exerts (the reaction) is minus the sum of the
+other forces on those components. Tractions are forces per unit area on a group's
+particles, each taking its share of the surface, measure^((d-1)/d) (its face on a lattice)
+times the thickness in 2D [R eq. 61], ramped as min(t / ramp, 1).
 """
 
 from __future__ import annotations
@@ -19,18 +23,31 @@ import numpy as np
 from parsph import expressions
 
 
+def values(spec: dict, path: str, X: np.ndarray, gid: np.ndarray, parameters: dict) -> np.ndarray:
+    """A condition's value at the particles X (rows): its `value` vector for all of them, or
+    its `expression` per component evaluated at each."""
+    dim = X.shape[1]
+    if spec.get("expression") is None:
+        return np.broadcast_to(np.asarray(spec["value"], float), (len(X), dim))
+    out = np.empty((len(X), dim))
+    for k, text in enumerate(spec["expression"]):
+        out[:, k] = expressions.Field(f"{path}.expression[{k}]", text, parameters, dim)(X, gid)
+    return out
+
+
 @dataclass
 class Constraint:
     kind: str
     index: np.ndarray  # local particle indices
     components: np.ndarray
-    value: np.ndarray  # (d,)
+    value: np.ndarray  # (particles, d)
     ramp: float
 
     def __post_init__(self):
-        # flat (particle, component) pairs of the constrained entries
+        # flat (particle, component) pairs of the constrained entries, and their values
         self.rows = np.repeat(self.index, len(self.components))
         self.cols = np.tile(self.components, len(self.index))
+        self.value = np.ascontiguousarray(self.value[:, self.components]).ravel()
 
     def velocity(self, t: float) -> np.ndarray:
         if self.kind == "fixed":
@@ -57,15 +74,17 @@ class Constraint:
 class BoundaryConditions:
     """The scene's constraints on this rank's owned particles."""
 
-    def __init__(self, specs: list, masks: dict, dim: int):
-        """masks: group name -> bool mask over the owned particles."""
+    def __init__(self, specs: list, masks: dict, X: np.ndarray, gid: np.ndarray, parameters: dict):
+        """masks: group name -> bool mask over the owned particles, at reference positions
+        X with global ids gid."""
+        dim = X.shape[1]
         self.items = []
-        self.mask = np.zeros((len(masks["all"]), dim), bool)
-        for spec in specs:
+        self.mask = np.zeros((len(X), dim), bool)
+        for i, spec in enumerate(specs):
             index = np.flatnonzero(masks[spec["group"]])
             comps = np.asarray(spec["components"], np.int64)
-            self.items.append(Constraint(spec["type"], index, comps, np.asarray(spec["value"], float),
-                                         spec["ramp"]))
+            value = values(spec, f"bc[{i}]", X[index], gid[index], parameters)
+            self.items.append(Constraint(spec["type"], index, comps, value, spec["ramp"]))
             item = self.items[-1]
             self.mask[item.rows, item.cols] = True
         # a prescribed velocity or displacement can change the kinetic energy
@@ -73,13 +92,35 @@ class BoundaryConditions:
 
     def set_velocity(self, v: np.ndarray, t: float) -> None:
         for c in self.items:
-            v[c.rows, c.cols] = c.velocity(t)[c.cols]
+            v[c.rows, c.cols] = c.velocity(t)
 
     def set_displacement(self, u: np.ndarray, t: float) -> None:
         for c in self.items:
             d = c.displacement(t)
             if d is not None:
-                u[c.rows, c.cols] = d[c.cols]
+                u[c.rows, c.cols] = d
+
+
+class Tractions:
+    """The scene's surface tractions on this rank's owned particles, as forces."""
+
+    def __init__(self, specs: list, masks: dict, X: np.ndarray, gid: np.ndarray, measure: np.ndarray,
+                 thickness: float, parameters: dict):
+        dim = X.shape[1]
+        share = measure ** ((dim - 1) / dim) * thickness  # each particle's part of the surface
+        self.items = []
+        for i, spec in enumerate(specs):
+            index = np.flatnonzero(masks[spec["group"]])
+            force = values(spec, f"tractions[{i}]", X[index], gid[index], parameters) * share[index, None]
+            self.items.append((index, force, spec["ramp"]))
+
+    def __bool__(self) -> bool:
+        return bool(self.items)
+
+    def add(self, force: np.ndarray, t: float) -> None:
+        """Add the traction forces at time t to `force` (owned particles)."""
+        for index, f, ramp in self.items:
+            force[index] += f * (1.0 if ramp <= 0 else min(t / ramp, 1.0))
 
 
 def apply_initial_conditions(specs: list, masks: dict, X, gid, u, v, parameters: dict) -> None:

@@ -115,7 +115,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
                     "[R Table 1] (Lagrangian kernel, nodal integration); kbm: Krongauz-Belytschko "
                     "corrected gradients with stress points [R §5.2] (a box); efg: element-free "
                     "Galerkin, MLS with a linear basis [R §4.4]"),
-        "integration": Key("str", "nodal", one_of("nodal", "cells"),
+        "integration": Key("str", None, one_of("nodal", "cells"),
                            "efg: at the particles (nodal) or at the Gauss points of background cells "
                            "[R §5.3] (cells: a box)"),
         "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
@@ -196,8 +196,17 @@ BC_KEYS = {
     "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement")),
     "group": Key("str", REQUIRED),
     "value": Key("vector", None, doc="velocity [m/s] or final displacement [m]"),
+    "expression": Key("strlist", None, doc="instead of value: one expression of the reference position "
+                                           "x, y, z and the parameters per component"),
     "components": Key("intlist", None, doc="constrained components (default: all)"),
     "ramp": Key("float", 0.0, non_negative, "time over which the value ramps up from 0 [s]"),
+}
+TRACTION_KEYS = {
+    "group": Key("str", REQUIRED, doc="the particles on the loaded surface"),
+    "value": Key("vector", None, doc="traction [Pa]"),
+    "expression": Key("strlist", None, doc="instead of value: one expression of the reference position "
+                                           "x, y, z and the parameters per component [Pa]"),
+    "ramp": Key("float", 0.0, non_negative, "time over which the traction ramps up from 0 [s]"),
 }
 WALL_KEYS = {
     "group": Key("str", "all", doc="particles that can touch the wall"),
@@ -238,8 +247,8 @@ PROBE_KEYS = {
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
-TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "walls", "tools", "symmetry", "initial",
-                               "probes", "bodies")
+TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
+                               "initial", "probes", "bodies")
 
 
 def _suggest(name: str, known) -> str:
@@ -396,13 +405,21 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         if any(c < 0 or c >= dim for c in bc["components"]) or not bc["components"]:
             raise InputError(f"bc[{i}].components must be a non-empty list of integers in [0, {dim - 1}]")
         if bc["type"] == "fixed":
-            if bc["value"] is not None:
+            if bc["value"] is not None or bc["expression"] is not None:
                 raise InputError(f"bc[{i}]: a 'fixed' condition takes no value")
             bc["value"] = [0.0] * dim
-        elif bc["value"] is None:
-            raise InputError(f"missing required key 'bc[{i}].value' for a '{bc['type']}' condition")
-        _vector_len(f"bc[{i}].value", bc["value"], dim)
+        else:
+            _value_or_expression(f"bc[{i}]", bc, raw, dim)
+        if bc["expression"] is None:  # absent, as in scenes written before the key existed
+            del bc["expression"]
         scene["bc"].append(bc)
+
+    scene["tractions"] = []
+    for i, t in enumerate(_array("tractions", raw.get("tractions"))):
+        item = _table(f"tractions[{i}]", t, TRACTION_KEYS, dim)
+        check_group(f"tractions[{i}].group", item["group"])
+        _value_or_expression(f"tractions[{i}]", item, raw, dim)
+        scene["tractions"].append(item)
 
     def obstacles(section: str, keys: dict, vectors: tuple) -> list:
         """The [[walls]] or [[tools]] tables: group checked, velocity defaulted to rest,
@@ -467,6 +484,8 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
             raise InputError(f"initial[{i}].gradient must be a {dim}x{dim} matrix")
         if ic["center"] is None:
             ic["center"] = [0.0] * dim
+        if ic["expression"] is None:  # absent, as in scenes written before the key existed
+            del ic["expression"]
         _vector_len(f"initial[{i}].center", ic["center"], dim)
         scene["initial"].append(ic)
 
@@ -588,8 +607,12 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
     if form["type"] in ("kbm", "efg") and form["hourglass"] > 0:
         raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {form['type']} "
                          "(give 0 or leave it out)")
-    if form["type"] != "efg" and form["integration"] != "nodal":
+    if form["type"] != "efg" and form["integration"] is not None:
         raise InputError(f"{path}.integration applies to type = 'efg'")
+    if form["type"] == "efg":
+        form["integration"] = form["integration"] or "nodal"
+    else:  # absent, as in scenes written before the key existed (checkpoints compare scenes)
+        del form["integration"]
     if form["type"] in ("sph", "rlm", "kbm", "efg") and form["hessian"] > 0:
         raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
                          f"not to {form['type']}")
@@ -690,6 +713,18 @@ def validate(raw: dict) -> dict:
             _check_integration_points(body, f"bodies[{b}]" if multi else "geometry", scene)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
+
+
+def _value_or_expression(path: str, item: dict, raw: dict, dim: int) -> None:
+    """A condition's `value` vector or its `expression` strings (checked), not both."""
+    if (item["value"] is None) == (item["expression"] is None):
+        raise InputError(f"{path}: give either value or expression")
+    if item["expression"] is not None:
+        _vector_len(f"{path}.expression", item["expression"], dim)
+        for k, text in enumerate(item["expression"]):
+            expressions.Field(f"{path}.expression[{k}]", text, raw.get("parameters", {}), dim)
+    else:
+        _vector_len(f"{path}.value", item["value"], dim)
 
 
 def _check_integration_points(body: dict, where: str, scene: dict) -> None:

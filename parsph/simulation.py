@@ -31,7 +31,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import config, fields, materials
-from parsph.bc import BoundaryConditions, apply_initial_conditions
+from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, total
@@ -192,7 +192,12 @@ class Simulation:
                 for b in self.bodies:
                     if b.formulation.type in galerkin.TYPES:
                         b.formulation.build(self, b, self.scene["kernel"]["type"])
-        self.bcs = BoundaryConditions(self.scene["bc"], self.groups, dim)
+        thickness = {1: self.scene["geometry"]["area"], 2: self.scene["geometry"]["thickness"], 3: 1.0}[dim]
+        with collective(self.comm):
+            parameters = self.scene["parameters"]
+            self.bcs = BoundaryConditions(self.scene["bc"], self.groups, self.X[:n], self.gid[:n], parameters)
+            self.tractions = Tractions(self.scene["tractions"], self.groups, self.X[:n], self.gid[:n],
+                                       self.measure[:n], thickness, parameters)
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
         for b in self.bodies:
@@ -335,6 +340,8 @@ class Simulation:
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
+        if self.tractions:
+            self.tractions.add(force, self.t)
         self.force = force
         self.acc = force / self.mass[:n, None]
 
@@ -347,11 +354,13 @@ class Simulation:
             f"unstable: {self._advice()}")
 
     def external_force(self) -> np.ndarray:
-        """Body force plus constraint reactions on the owned particles."""
+        """Body force, tractions and constraint reactions on the owned particles."""
         n = self.n_owned
         ext = np.zeros((n, self.dim))
         if self.body_acc is not None:
             ext += self.mass[:n, None] * self.body_acc
+        if self.tractions:
+            self.tractions.add(ext, self.t)
         ext[self.bcs.mask] -= self.force[self.bcs.mask]
         return ext
 
@@ -500,6 +509,13 @@ class Simulation:
         if fields.known(name) and fields.get(name).units is not None:  # a registered field
             return self.particles.arrays[name][sel]
         raise ValueError(name)
+
+    def quadrature(self) -> tuple:
+        """(X, F, w): reference positions, deformation gradients and quadrature weights of
+        this rank's owned integration points, body after body (the particles for the nodal
+        methods; particles, stress or Gauss points for the Galerkin ones)."""
+        parts = [q for b in self.bodies for q in b.formulation.quadrature(self, b)]
+        return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
 
     def disorder(self) -> np.ndarray:
         """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""

@@ -64,7 +64,7 @@ def integration_set(formulation: dict) -> str | None:
     """The point set of integration points a formulation table needs besides the particles."""
     if formulation["type"] == "kbm":
         return STRESS_POINTS
-    if formulation["type"] == "efg" and formulation["integration"] == "cells":
+    if formulation["type"] == "efg" and formulation.get("integration") == "cells":
         return GAUSS_POINTS
     return None
 
@@ -288,6 +288,21 @@ class GalerkinFormulation:
             ((prefix + "VP",) if prefix else ())
         return [Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
                 Stage("forces", forces, reads=reads, writes=("f_int",))]
+
+    def quadrature(self, sim, body) -> list:
+        """[(X, F, w)] of the body's owned integration points, set by set."""
+        out = []
+        for coupling in self.couplings:
+            if coupling.integrates:
+                weight = self.weights(sim, coupling.points)
+                if coupling.points == "particles":
+                    lo, hi = body.lo, body.hi
+                    out.append((sim.X[lo:hi], sim.F[lo:hi], weight[lo:hi]))
+                else:
+                    lo, hi = body.set_rows[coupling.points]
+                    A = sim.sets[coupling.points].arrays
+                    out.append((A["X"][lo:hi], A["F"][lo:hi], weight[lo:hi]))
+        return out
 
     def strain_energy_terms(self, sim, body) -> np.ndarray:
         """w_q psi_q over the body's owned integration points."""

@@ -55,6 +55,11 @@ class NodalFormulation:
     def pair_options(self) -> PairOptions:
         return PairOptions(corrected=self.type != "sph", hourglass_form=self.hourglass_form, alpha=self.alpha)
 
+    def quadrature(self, sim, body) -> list:
+        """[(X, F, w)] of the body's owned integration points: its particles, their volumes."""
+        lo, hi = body.lo, body.hi
+        return [(sim.X[lo:hi], sim.F[lo:hi], sim.volume[lo:hi])]
+
     def stages(self, sim, body) -> list:
         """The passes of one force evaluation over `body`'s owned particles of `sim`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0

@@ -278,14 +278,15 @@ def load(spec: str, out_dir: str, comm) -> dict:
 
 
 def differing_keys(old: dict, new: dict, prefix: str = "") -> list:
-    """Keys whose values differ between two resolved scenes (lists compared whole)."""
+    """Keys whose values differ between two resolved scenes (lists compared whole; a key
+    absent from one and empty or None in the other does not differ)."""
     keys = []
     for k in sorted(set(old) | set(new)):
         path = f"{prefix}{k}"
         a, b = old.get(k), new.get(k)
         if isinstance(a, dict) and isinstance(b, dict):
             keys += differing_keys(a, b, path + ".")
-        elif a != b:
+        elif a != b and (a or b):  # an absent list and an empty one are the same
             keys.append(path)
     return keys
 

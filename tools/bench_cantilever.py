@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Convergence of every method on Timoshenko & Goodier's cantilever (runs/cantilever.toml,
+[R §9.1]): L2 error of the displacement over the particles [R eq. 71-72] and energy-norm
+error of the strain over each method's own integration points [R eq. 73-74, DATA_SHEET §A:
+sqrt(sum_q w_q e:C:e / sum_q w_q eps:C:eps), e = eps_h - eps], at rest after dynamic
+relaxation, for n = 4, 8, 16, 32 particles across the depth; fitted rates against the
+spacing and the CPU time of each run. Symmetrised SPH runs with h proportional to the
+spacing and, as [R] compares, with a fixed support (that of n = 4). Prints a table and writes it as JSON.
+
+usage: tools/bench_cantilever.py [--n 4 8 16 32] [--methods tlsph tlsph_a0 sph sph_fixed rlm kbm efg efg_cells]
+                                 [--json results/bench_cantilever.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import tomllib
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from mpi4py import MPI  # noqa: E402
+
+from parsph import config  # noqa: E402
+from parsph.analytic import timoshenko_cantilever  # noqa: E402
+from parsph.build import build_local  # noqa: E402
+from parsph.simulation import Simulation  # noqa: E402
+
+METHODS = {
+    "tlsph": ("corrected SPH, alpha = 50", ['formulation.type="tlsph"']),
+    "tlsph_a0": ("corrected SPH, alpha = 0", ['formulation.type="tlsph"', "formulation.hourglass=0"]),
+    "sph": ("symmetrised SPH", ['formulation.type="sph"']),
+    "sph_fixed": ("symmetrised SPH, fixed h", ['formulation.type="sph"']),  # support 2 spacings at n = 4
+    "rlm": ("RLM", ['formulation.type="rlm"']),
+    "kbm": ("KBM (stress points)", ['formulation.type="kbm"']),
+    "efg": ("EFG nodal", ['formulation.type="efg"']),
+    "efg_cells": ("EFG cells", ['formulation.type="efg"', 'formulation.integration="cells"']),
+}
+
+
+def errors(sim: Simulation) -> tuple:
+    """(L2 error of u over the particles, energy-norm error over the integration points)."""
+    p = sim.scene["parameters"]
+    material = sim.scene["material"]
+    exact = lambda X: timoshenko_cantilever(X, p["L"], p["D"], material["youngs_modulus"],  # noqa: E731
+                                            material["poisson_ratio"], p["P"])
+    n = sim.n_owned
+    u, _ = exact(sim.X[:n])
+    w = sim.volume[:n, None]
+    l2 = np.sqrt(np.sum(w * (sim.u[:n] - u) ** 2) / np.sum(w * u ** 2))
+    X, F, weight = sim.quadrature()
+    _, strain = exact(X)
+    strain_h = 0.5 * (F + np.transpose(F, (0, 2, 1))) - np.eye(2)
+    lam, mu = sim.bodies[0].constants.lam, sim.bodies[0].constants.mu
+
+    def energy(e):
+        trace = np.trace(e, axis1=1, axis2=2)
+        return np.sum(weight * (lam * trace ** 2 + 2 * mu * np.einsum("nab,nab->n", e, e)))
+
+    return float(l2), float(np.sqrt(energy(strain_h - strain) / energy(strain)))
+
+
+def run(method: str, n: int) -> dict:
+    raw_overrides = [*METHODS[method][1], f"parameters.n={n}"]
+    if method == "sph_fixed":  # the support of n = 4 at every resolution
+        raw_overrides.append(f"kernel.support={2.0 * n / 4}")
+    with open(os.path.join(os.path.dirname(__file__), "..", "runs", "cantilever.toml"), "rb") as fh:
+        raw = tomllib.load(fh)
+    for text in raw_overrides:
+        config.apply_override(raw, *config.parse_override(text))
+    scene = config.validate(raw)
+    start = time.process_time()
+    sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
+    end = scene["time"]["end"]
+    while sim.t < end * (1 - 1e-12):
+        sim.step(end)
+    seconds = time.process_time() - start
+    l2, energy = errors(sim)
+    return {"method": method, "n": n, "particles": sim.n_owned, "spacing": scene["parameters"]["D"] / n,
+            "steps": sim.step_count, "l2": l2, "energy": energy, "cpu_seconds": seconds}
+
+
+def rate(rows: list, key: str) -> float:
+    """Slope of log(error) against log(spacing) over the rows."""
+    h = np.log([r["spacing"] for r in rows])
+    e = np.log([r[key] for r in rows])
+    return float(np.polyfit(h, e, 1)[0])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[4, 8, 16, 32])
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--json", default="results/bench_cantilever.json")
+    args = ap.parse_args()
+    rows = []
+    for method in args.methods:
+        mine = []
+        for n in args.n:
+            mine.append(run(method, n))
+            r = mine[-1]
+            print(f"{METHODS[method][0]:26s} n = {n:3d} ({r['particles']:5d} particles, {r['steps']:6d} steps): "
+                  f"L2 {r['l2']:.3e}  energy {r['energy']:.3e}  {r['cpu_seconds']:.1f} s", flush=True)
+        if len(mine) > 1:
+            print(f"{METHODS[method][0]:26s} rates: L2 {rate(mine, 'l2'):.2f}, energy {rate(mine, 'energy'):.2f}",
+                  flush=True)
+        rows += mine
+    os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
+    with open(args.json, "w") as fh:
+        json.dump(rows, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()
