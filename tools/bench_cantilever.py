@@ -4,8 +4,7 @@
 error of the strain over each method's own integration points [R eq. 73-74, DATA_SHEET §A:
 sqrt(sum_q w_q e:C:e / sum_q w_q eps:C:eps), e = eps_h - eps], at rest after dynamic
 relaxation, for n = 4, 8, 16, 32 particles across the depth; fitted rates against the
-spacing and the CPU time of each run. Symmetrised SPH runs with h proportional to the
-spacing and, as [R] compares, with a fixed support (that of n = 4). Prints a table and writes it as JSON.
+X
 
 usage: tools/bench_cantilever.py [--n 4 8 16 32] [--methods tlsph tlsph_a0 sph sph_fixed rlm kbm efg efg_cells]
                                  [--json results/bench_cantilever.json]
@@ -91,6 +90,33 @@ def rate(rows: list, key: str) -> float:
     return float(np.polyfit(h, e, 1)[0])
 
 
+def plot(rows: list, path: str) -> None:
+    """Work-precision chart of the rows: energy error against CPU time, L2 and energy error
+    against the spacing, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    for method, (label, _) in METHODS.items():
+        sel = [r for r in rows if r["method"] == method]
+        if not sel:
+            continue
+        axes[0].loglog([r["cpu_seconds"] for r in sel], [r["energy"] for r in sel], marker="o", label=label)
+        axes[1].loglog([r["spacing"] for r in sel], [r["l2"] for r in sel], marker="o", label=label)
+        axes[2].loglog([r["spacing"] for r in sel], [r["energy"] for r in sel], marker="o", label=label)
+    axes[0].set(xlabel="CPU time [s]", ylabel="energy-norm error", title="work-precision")
+    axes[1].set(xlabel="spacing", ylabel="L2 error of u", title="displacement")
+    axes[2].set(xlabel="spacing", ylabel="energy-norm error", title="strain energy")
+    for ax in axes:
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.suptitle("Timoshenko-Goodier cantilever (runs/cantilever.toml)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[4, 8, 16, 32])
@@ -112,6 +138,7 @@ def main():
     os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
     with open(args.json, "w") as fh:
         json.dump(rows, fh, indent=2)
+    plot(rows, os.path.splitext(args.json)[0] + ".png")
 
 
 if __name__ == "__main__":
