@@ -42,6 +42,19 @@ def run_until(sim: Simulation, end: float, every: int = 1, probe=None) -> dict:
     return {k: np.array([r[k] for r in rows]) for k in rows[0]}
 
 
+def energy_gradient(sim: Simulation, energy, i: int, eps: float) -> np.ndarray:
+    """Central differences of energy() with respect to particle i's displacement."""
+    out = np.zeros(sim.dim)
+    for a in range(sim.dim):
+        sim.u[i, a] += eps
+        up = energy()
+        sim.u[i, a] -= 2 * eps
+        down = energy()
+        sim.u[i, a] += eps
+        out[a] = (up - down) / (2 * eps)
+    return out
+
+
 def block_2d(model="saint_venant_kirchhoff", hourglass=0.0, form="variational", extra=""):
     """A small free 2D block scene (text), 10 x 6 particles."""
     elastic = ("shear_modulus = 4.0e5\nbulk_modulus = 2.0e6" if model.endswith("incompressible")

@@ -26,8 +26,8 @@ from parsph.geometry.gauss_points import BoxGaussPoints
 from parsph.geometry.lattice import Box
 from parsph.geometry.stress_points import BoxStressPoints
 from parsph.geometry.voronoi import _cells
-from physics import block_2d, scene_from, simulation
-from test_nodal_methods import BAR_C, BAR_PERIOD, H_AFFINE, PLATE, downward_zero_crossings, edge_row
+from physics import block_2d, energy_gradient, scene_from, simulation
+from test_nodal_methods import BAR_C, BAR_PERIOD, H_AFFINE, PLATE, bar, downward_zero_crossings, edge_row
 
 KERNEL = ['kernel.type="cubic_spline"', "kernel.support=2.0"]
 
@@ -169,15 +169,7 @@ def test_efg_force_is_the_strain_energy_gradient_kbm_is_not(method):
         sim.compute_forces()
         return float(sum(sim.energy_sums()["strain"][1:], sim.energy_sums()["strain"][0]))
 
-    eps = 1e-7
-    gradient = np.zeros(2)
-    for a in range(2):
-        sim.u[i, a] += eps
-        up = energy()
-        sim.u[i, a] -= 2 * eps
-        down = energy()
-        sim.u[i, a] += eps
-        gradient[a] = (up - down) / (2 * eps)
+    gradient = energy_gradient(sim, energy, i, 1e-7)
     difference = np.abs(force + gradient).max() / np.abs(force).max()
     if method == "kbm":
         assert difference > 1e-3
@@ -197,19 +189,11 @@ def test_bar1d_follows_the_analytic_bar(method):
     cells); period -0.9 %, -1.5 %, -1.5 %. EFG's force is the energy gradient: its total
     energy stays within 8e-4 (the leapfrog's fluctuation). KBM's is not: its total energy
     oscillates by up to 8.7 % of the initial energy, without growing."""
-    sim = simulation("bar1d", [*METHODS[method], *KERNEL, 'geometry.parts.0.placement="cell"'])
+    cell = 'geometry.parts.0.placement="cell"'
     if method != "efg_nodal":
+        sim = simulation("bar1d", [*METHODS[method], *KERNEL, cell])
         assert integration_points(sim)[0].total == {"kbm": 38, "efg_cells": 20 * 4 - 1}[method]
-    tip = sim.group_index("B")[0]
-    end = 2.0 * BAR_PERIOD
-    t, u, energy = [0.0], [0.0], [sim.diagnostics()["total_energy"]]
-    while sim.t < end * (1 - 1e-12):
-        sim.step(end)
-        t.append(sim.t)
-        u.append(sim.u[tip, 0])
-        if sim.step_count % 10 == 0:
-            energy.append(sim.diagnostics()["total_energy"])
-    t, u, energy = np.array(t), np.array(u), np.array(energy)
+    t, u, energy = bar(method.removesuffix("_nodal").removesuffix("_cells"), extra=[*METHODS[method][1:], cell])
     exact = bar_tip_displacement(t, 1.0, BAR_C, 5.0)
     crossings = downward_zero_crossings(t, u)
     assert len(crossings) == 2

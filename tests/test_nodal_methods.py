@@ -205,10 +205,10 @@ BAR_C = math.sqrt(200e9 / 7850)  # runs/bar1d.toml
 BAR_PERIOD = 4.0 / BAR_C
 
 
-def bar(ftype: str, periods: float = 2.0):
-    """runs/bar1d.toml with [R]'s kernel: times, tip displacement (every step), total
-    energy (every 10 steps)."""
-    sim = simulation("bar1d", [f'formulation.type="{ftype}"', "kernel.support=2.0"])
+def bar(ftype: str, periods: float = 2.0, extra=()):
+    """runs/bar1d.toml with [R]'s kernel (and `extra` overrides): times, tip displacement
+    (every step), total energy (every 10 steps)."""
+    sim = simulation("bar1d", [f'formulation.type="{ftype}"', "kernel.support=2.0", *extra])
     tip = sim.group_index("B")[0]
     end = periods * BAR_PERIOD
     t, u, energy = [0.0], [0.0], [sim.diagnostics()["total_energy"]]

@@ -40,7 +40,9 @@ from numba import njit
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations.base import Stage, source_hash
+from parsph.formulations import tlsph
 from parsph.formulations.reference import PairOptions
+from parsph.formulations.tlsph import gradient_row
 from parsph.kernels.correction import MAX_CONDITION
 from parsph.kernels.functions import evaluate
 from parsph.materials import elastic, update
@@ -80,13 +82,21 @@ def _kernel_pairs(relation, x_eval, x_node, support, kernel, node_of_pair, eval_
     return w, scale[:, None] * sep, sep
 
 
-def _refuse(bad, condition, counts, x_rows, gid_rows, matrix, what):
-    first = int(np.flatnonzero(bad)[0])
-    where = ", ".join(f"{c:.6g}" for c in x_rows[first])
-    raise InputError(
-        f"the {matrix} of {what} {int(gid_rows[first])} at ({where}) is singular or ill-conditioned "
-        f"(condition number {condition[first]:.3g}, {int(counts[first])} particles in reach); "
-        f"{int(bad.sum())} point(s) affected. Increase kernel.support")
+def _inverse(matrices, active, counts, x_rows, gid_rows, matrix, what):
+    """Inverses of the active rows' matrices (the others are set to the identity); raises
+    InputError naming the first active point whose matrix is singular or ill-conditioned."""
+    n = len(matrices)
+    matrices[~active] = np.eye(matrices.shape[1])
+    condition = np.linalg.cond(matrices) if n else np.zeros(0)
+    bad = active & ~(condition < MAX_CONDITION)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        where = ", ".join(f"{c:.6g}" for c in x_rows[first])
+        raise InputError(
+            f"the {matrix} of {what} {int(gid_rows[first])} at ({where}) is singular or ill-conditioned "
+            f"(condition number {condition[first]:.3g}, {int(counts[first])} particles in reach); "
+            f"{int(bad.sum())} point(s) affected. Increase kernel.support")
+    return np.linalg.inv(matrices) if n else matrices
 
 
 def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, active, what):
@@ -112,12 +122,7 @@ def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, 
         gws = (grad - (w / S[row])[:, None] * dS[row]) / S[row][:, None]
         A = np.zeros((n, dim, dim))
         np.add.at(A, row, np.einsum("pa,pb->pab", x_cols[j] - x_rows[row], gws))
-        A[~active] = np.eye(dim)
-        condition = np.linalg.cond(A) if n else np.zeros(0)
-        bad = active & ~(condition < MAX_CONDITION)
-        if bad.any():
-            _refuse(bad, condition, counts, x_rows, gid_rows, "correction matrix A", what)
-        Ainv = np.linalg.inv(A) if n else A
+        Ainv = _inverse(A, active, counts, x_rows, gid_rows, "correction matrix A", what)
         G = np.einsum("pba,pb->pa", Ainv[row], gws)
         return np.ascontiguousarray(G), np.column_stack([S, dS])
     m = dim + 1
@@ -131,12 +136,7 @@ def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, 
     np.add.at(M, row, w[:, None, None] * np.einsum("pa,pb->pab", p, p))
     dM = np.zeros((n, dim, m, m))
     np.add.at(dM, row, grad[:, :, None, None] * np.einsum("pa,pb->pab", p, p)[:, None])
-    M[~active] = np.eye(m)
-    condition = np.linalg.cond(M) if n else np.zeros(0)
-    bad = active & ~(condition < MAX_CONDITION)
-    if bad.any():
-        _refuse(bad, condition, counts, x_rows, gid_rows, "moment matrix M", what)
-    Minv = np.linalg.inv(M) if n else M
+    Minv = _inverse(M, active, counts, x_rows, gid_rows, "moment matrix M", what)
     data = np.concatenate([scale[:, None], Minv.reshape(n, -1), dM.reshape(n, -1)], axis=1)
     return _mls_gradients(p, w, grad, data[row], dim), data
 
@@ -320,7 +320,7 @@ class GalerkinFormulation:
 
 
 # ------------------------------------------------------------------ compiled stages
-_SOURCE_HASH = source_hash(__file__, elastic.__file__, update.__file__)
+_SOURCE_HASH = source_hash(__file__, tlsph.__file__, elastic.__file__, update.__file__)
 
 
 def compile_stages(dim: int, law: int):
@@ -359,16 +359,7 @@ def _kinematics(dim, law, lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP,
     Cinv = np.empty((dim, dim))
     first_bad = -1
     for q in range(lo, hi):
-        b0 = base[q]
-        for a in range(dim):
-            for b in range(dim):
-                F[q, a, b] = 1.0 if a == b else 0.0
-        for p in range(ptr[q], ptr[q + 1]):
-            j = idx[p]
-            for a in range(dim):
-                dd = d[j, a] - d[b0, a]
-                for b in range(dim):
-                    F[q, a, b] += dd * G[p, b]
+        gradient_row(dim, q, base[q], ptr, idx, G, d, F)
         e = update.update(law, F[q], dim, c, state, q, P, S, C, Cinv)
         J[q] = det(F[q], dim)
         if not (np.isfinite(e) and J[q] > 0.0) and first_bad < 0:

@@ -128,15 +128,15 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
 
 
 @njit(cache=True, inline="always")
-def _gradient_row(dim, i, ptr, idx, g, d, f):
-    """f[i] = I + sum_j (d_j - d_i) (x) g_ij."""
+def gradient_row(dim, i, base, ptr, idx, g, d, f):
+    """f[i] = I + sum_j (d_j - d_base) (x) g_ij over row i of (ptr, idx, g)."""
     for a in range(dim):
         for b in range(dim):
             f[i, a, b] = 1.0 if a == b else 0.0
     for p in range(ptr[i], ptr[i + 1]):
         j = idx[p]
         for a in range(dim):
-            du = d[j, a] - d[i, a]
+            du = d[j, a] - d[base, a]
             for b in range(dim):
                 f[i, a, b] += du * g[p, b]
 
@@ -144,7 +144,7 @@ def _gradient_row(dim, i, ptr, idx, g, d, f):
 @njit(cache=True, inline="always")
 def _gradient(dim, lo, hi, ptr, idx, g, d, f):
     for i in range(lo, hi):
-        _gradient_row(dim, i, ptr, idx, g, d, f)
+        gradient_row(dim, i, i, ptr, idx, g, d, f)
 
 
 @njit(cache=True, inline="always")
@@ -169,7 +169,7 @@ def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, g
                     for b in range(dim):
                         fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
         else:
-            _gradient_row(dim, i, ptr, idx, g, d, fs)
+            gradient_row(dim, i, i, ptr, idx, g, d, fs)
         if updated:  # F = f F^r [V §3.1]
             for a in range(dim):
                 for b in range(dim):
