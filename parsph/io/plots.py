@@ -60,7 +60,8 @@ def plot_history(path: str, names: list, output: str | None) -> str:
 
 def plot_snapshots(path: str, field: str, count: int, output: str | None) -> str:
     """Particle clouds coloured by `field` at `count` times spread over the run (2D: x-y;
-    3D: x-z projection)."""
+    3D: x-z projection), side by side, or one above the other for a body more than twice
+    as wide as it is tall."""
     plt = _pyplot()
     with h5py.File(path, "r") as f:
         steps = sorted(k for k in f if k.startswith("step_"))
@@ -73,14 +74,23 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None) -> str
     values = [np.linalg.norm(v, axis=1) if v.ndim == 2 else v for _, _, v in frames]
     lo = min(v.min() for v in values)
     hi = max(v.max() for v in values)
-    fig, axes = plt.subplots(1, len(frames), figsize=(3.2 * len(frames), 4), squeeze=False)
-    for ax, (t, x, _), v in zip(axes[0], frames, values):
-        vertical = 2 if np.ptp(x[:, 2]) > 0 else 1
+    vertical = 2 if np.ptp(frames[0][1][:, 2]) > 0 else 1
+    extent = [max(np.ptp(x[:, k]) for _, x, _ in frames) for k in (0, vertical)]
+    aspect = extent[0] / extent[1] if extent[1] > 0 else 1.0
+    if aspect > 2.0:  # slender: a column of wide panels
+        width = 9.0
+        height = min(width / aspect, 3.0) + 0.6
+        fig, axes = plt.subplots(len(frames), 1, figsize=(width + 1.5, height * len(frames)), squeeze=False)
+        axes = axes[:, 0]
+    else:
+        fig, axes = plt.subplots(1, len(frames), figsize=(3.2 * len(frames), 4), squeeze=False)
+        axes = axes[0]
+    for ax, (t, x, _), v in zip(axes, frames, values):
         sc = ax.scatter(x[:, 0], x[:, vertical], c=v, s=4, vmin=lo, vmax=hi, cmap="viridis")
         ax.set_aspect("equal")
         ax.set_title(f"t = {t:.4g} s", fontsize=9)
         ax.tick_params(labelsize=7)
-    fig.colorbar(sc, ax=axes[0].tolist(), label=field, shrink=0.8)
+    fig.colorbar(sc, ax=list(axes), label=field, shrink=0.8)
     output = output or os.path.splitext(path)[0] + f"_{field}.png"
     fig.savefig(output, dpi=110)
     return output
