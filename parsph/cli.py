@@ -45,7 +45,9 @@ def _parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plot", help="plot history series or snapshot fields to PNG")
     pl.add_argument("file", help="OUT/history.h5 or OUT/snapshots.h5")
     pl.add_argument("names", nargs="*", help="history series (default: energies) or one snapshot field (default: J)")
-    pl.add_argument("--frames", type=int, default=4, help="snapshots to draw side by side")
+    pl.add_argument("--frames", type=int, default=4, help="snapshots to draw side by side (1: the last)")
+    pl.add_argument("--limits", type=float, nargs=2, metavar=("LOW", "HIGH"),
+                    help="colour scale of a snapshot field (default: its range over the frames)")
     pl.add_argument("--output", "-o", help="PNG file (default next to the input file)")
     return p
 
@@ -109,7 +111,8 @@ def main(argv=None) -> int:
             if not os.path.exists(args.file):
                 raise InputError(f"file not found: {args.file}")
             if os.path.basename(args.file).startswith("snapshots"):
-                print(plots.plot_snapshots(args.file, (args.names or ["J"])[0], args.frames, args.output))
+                print(plots.plot_snapshots(args.file, (args.names or ["J"])[0], args.frames, args.output,
+                                           args.limits))
             else:
                 print(plots.plot_history(args.file, args.names, args.output))
     except KeyboardInterrupt:

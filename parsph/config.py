@@ -131,6 +131,10 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "hourglass": Key("float", None, non_negative,
                          "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
                          "0 for sph, rlm and kbm (the methods as [R] compares them)"),
+        "kernel": Key("str", None, one_of("lagrangian", "eulerian"),
+                      "sph, rlm: the kernel and neighbours in the reference configuration (lagrangian, "
+                      "the default) or in the current one, rebuilt at every step (eulerian) "
+                      "[R eq. 16-17, Table 2]"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
     },
@@ -607,6 +611,11 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
     if form["type"] in ("kbm", "efg") and form["hourglass"] > 0:
         raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {form['type']} "
                          "(give 0 or leave it out)")
+    if form["kernel"] == "eulerian" and form["type"] not in ("sph", "rlm"):
+        raise InputError(f"{path}.kernel = 'eulerian' is available for type = 'sph' and 'rlm' "
+                         f"(for corrected SPH use type = 'ulsph' with update_every = 1)")
+    if form["kernel"] != "eulerian":  # absent: as in scenes written before the key existed
+        del form["kernel"]
     if form["type"] != "efg" and form["integration"] is not None:
         raise InputError(f"{path}.integration applies to type = 'efg'")
     if form["type"] == "efg":
@@ -647,8 +656,10 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
         out.append(body)
     if not out:
         raise InputError("bodies is empty: give at least one [[bodies]] table, or none and a [material]")
-    if len(out) > 1 and any(b["formulation"]["type"] == "ulsph" or b["formulation"]["hessian"] > 0 for b in out):
-        raise InputError("formulation.type = 'ulsph' and formulation.hessian need a scene of one body")
+    if len(out) > 1 and any(b["formulation"]["type"] == "ulsph" or b["formulation"]["hessian"] > 0
+                            or b["formulation"].get("kernel") == "eulerian" for b in out):
+        raise InputError("formulation.type = 'ulsph', formulation.hessian and formulation.kernel = 'eulerian' "
+                         "need a scene of one body")
     return out
 
 

@@ -87,6 +87,8 @@ class Simulation:
         self.hourglass = any(f.hourglass_form for f in forms)
         self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
+        if self.updated:
+            owners.add("updated")
         self.carried = fields.carried(owners)  # the registered fields the particles carry
         self.rebalance = scene["parallel"]["rebalance"]
         self.group_names = sorted(scene["groups"])

@@ -107,7 +107,7 @@ def test_the_registry_decides_what_migrates_checkpoints_and_mirrors():
     from parsph.formulations import nodal
 
     assert nodal.UPDATED_FIELDS  # imported: declares the updated reference's fields
-    tl, ul = fields.carried({"tlsph"}), fields.carried({"ulsph"})
+    tl, ul = fields.carried({"tlsph"}), fields.carried({"ulsph", "updated"})
     assert "Xr" not in tl and {"Xr", "Fr", "measure_r", "volume_r"} <= set(ul)
     assert fields.checkpointed(ul)[:9] == ["gid", "X", "measure", "volume", "mass", "support", "groups",
                                            "u", "v"]

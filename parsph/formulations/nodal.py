@@ -11,6 +11,11 @@
          F and in the force row f_i = V_i sum_j (P_i + P_j) g_ij (DATA_SHEET §A: the printed
          sign corrected; not momentum-conserving)
 
+sph and rlm take an Eulerian kernel (`kernel = "eulerian"`, [R eq. 16, Table 2]) as the
+updated reference rebuilt at every step: kernel, neighbours and corrections in the current
+configuration, F = f F^r, the forces with the stress carried to the current configuration
+(V^r P F^rT = V sigma), the state carried through the rebuilds like the updated reference's.
+
 All four evaluate F and the stress at the particles (formulations.tlsph holds the compiled
 kernels); `stages` lists the passes of one force evaluation with what each reads and writes.
 """
@@ -26,12 +31,13 @@ from parsph.formulations.reference import PairOptions
 
 TYPES = ("tlsph", "ulsph", "sph", "rlm")
 
-# the updated reference [V §3.1], carried when a body uses the updated formulation
+# the updated reference [V §3.1], carried when a body updates its reference (ulsph, or an
+# Eulerian kernel)
 UPDATED_FIELDS = (
-    Field("Xr", "point", owner="ulsph", doc="reference position X^r of the updated reference [m]"),
-    Field("Fr", "tensor", owner="ulsph", doc="deformation gradient of the updated reference"),
-    Field("measure_r", "scalar", owner="ulsph", doc="measure in the updated reference"),
-    Field("volume_r", "scalar", owner="ulsph", doc="volume in the updated reference [m^3]"),
+    Field("Xr", "point", owner="updated", doc="reference position X^r of the updated reference [m]"),
+    Field("Fr", "tensor", owner="updated", doc="deformation gradient of the updated reference"),
+    Field("measure_r", "scalar", owner="updated", doc="measure in the updated reference"),
+    Field("volume_r", "scalar", owner="updated", doc="volume in the updated reference [m^3]"),
 )
 register(*UPDATED_FIELDS)
 
@@ -41,12 +47,14 @@ class NodalFormulation:
 
     def __init__(self, options: dict, dim: int, law: int):
         self.type = options["type"]
-        self.updated = self.type == "ulsph"
+        self.eulerian = options.get("kernel") == "eulerian"
+        self.updated = self.type == "ulsph" or self.eulerian
         self.alpha = options["hourglass"]
         self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
         self.eta = options["hessian"]
         self.weighted_hessian = options["hessian_correction"] == "weighted"
-        self.update_every, self.update_strain = options["update_every"], options["update_strain"]
+        self.update_every, self.update_strain = (1, 0.0) if self.eulerian else \
+            (options["update_every"], options["update_strain"])
         force = "rlm" if self.type == "rlm" else options["force_form"]
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
             dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, self.updated, self.eta > 0)

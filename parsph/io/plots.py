@@ -58,8 +58,9 @@ def plot_history(path: str, names: list, output: str | None) -> str:
     return output
 
 
-def plot_snapshots(path: str, field: str, count: int, output: str | None) -> str:
-    """Particle clouds coloured by `field` at `count` times spread over the run (2D: x-y;
+def plot_snapshots(path: str, field: str, count: int, output: str | None, limits=None) -> str:
+    """Particle clouds coloured by `field` at `count` times spread over the run (one: the
+    last snapshot; 2D: x-y;
     3D: x-z projection), side by side, or one above the other for a body more than twice
     as wide as it is tall."""
     plt = _pyplot()
@@ -67,13 +68,13 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None) -> str
         steps = sorted(k for k in f if k.startswith("step_"))
         if not steps:
             raise InputError(f"{path} holds no snapshots")
-        pick = [steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, count).round().astype(int))]
+        first = 0 if count > 1 else len(steps) - 1  # one frame: the last
+        pick = [steps[i] for i in np.unique(np.linspace(first, len(steps) - 1, count).round().astype(int))]
         if field not in f[pick[0]]:
             raise InputError(f"no field '{field}' in {path}; it has: {', '.join(sorted(f[pick[0]]))}")
         frames = [(f[s].attrs["time"], f[s]["position"][()], f[s][field][()]) for s in pick]
     values = [np.linalg.norm(v, axis=1) if v.ndim == 2 else v for _, _, v in frames]
-    lo = min(v.min() for v in values)
-    hi = max(v.max() for v in values)
+    lo, hi = limits if limits else (min(v.min() for v in values), max(v.max() for v in values))
     vertical = 2 if np.ptp(frames[0][1][:, 2]) > 0 else 1
     extent = [max(np.ptp(x[:, k]) for _, x, _ in frames) for k in (0, vertical)]
     aspect = extent[0] / extent[1] if extent[1] > 0 else 1.0
@@ -83,7 +84,8 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None) -> str
         fig, axes = plt.subplots(len(frames), 1, figsize=(width + 1.5, height * len(frames)), squeeze=False)
         axes = axes[:, 0]
     else:
-        fig, axes = plt.subplots(1, len(frames), figsize=(3.2 * len(frames), 4), squeeze=False)
+        size = (3.2 * len(frames), 4) if len(frames) > 1 else (6.4, 4.5)
+        fig, axes = plt.subplots(1, len(frames), figsize=size, squeeze=False)
         axes = axes[0]
     for ax, (t, x, _), v in zip(axes, frames, values):
         sc = ax.scatter(x[:, 0], x[:, vertical], c=v, s=4, vmin=lo, vmax=hi, cmap="viridis")
