@@ -97,6 +97,20 @@ def run_parsph():
     return parsph
 
 
+def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> None:
+    """Run `parsph run SCENE ARGS` on each rank count (outputs under out_dir) and assert that
+    tools/compare_outputs.py finds every history series and the final state identical."""
+    outs = []
+    for n in ranks:
+        out = Path(out_dir) / f"ranks_{n}"
+        proc = parsph(["run", scene, "--out", out, "--quiet", *args], ranks=n)
+        assert proc.returncode == 0, proc.stderr
+        outs.append(str(out))
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *outs],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+
+
 # ---- MPI jobs with more ranks than cores
 # MPICH (ch4:ucx) waits for a message by calling ucp_worker_progress in a loop. With more
 # ranks than cores (3 ranks, or 2 ranks beside another job, on 2 cores) a waiting rank spins

@@ -9,14 +9,11 @@ a square lattice W'(2h) = 0, so a particle feels its 8 nearest neighbours (4 in 
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import ROOT, mpiexec
+from conftest import ROOT, assert_same_on_ranks
 from parsph.analytic import bar_tip_displacement
 from physics import block_2d, run_until, simulation
 
@@ -357,23 +354,8 @@ def test_sph_and_rlm_same_answer_on_1_and_3_ranks(tmp_path):
     """A 24 x 8 plate clamped at the left, its right quarter thrown; 50 steps."""
     scene = tmp_path / "plate.toml"
     scene.write_text(PLATE)
-    launcher = os.environ.get("PARSPH_MPIEXEC") or mpiexec()
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     for ftype in ("sph", "rlm"):
-        outs = []
-        for ranks in (1, 3):
-            out = tmp_path / f"{ftype}_{ranks}"
-            cmd = [sys.executable, "-m", "parsph", "run", str(scene), "--set", f'formulation.type="{ftype}"',
-                   "--out", str(out), "--quiet", "--debug"]
-            if ranks > 1:
-                cmd = [launcher, "-n", str(ranks), *cmd]
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
-            assert proc.returncode == 0, proc.stderr
-            outs.append(out)
-        proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *map(str, outs)],
-                              capture_output=True, text=True, timeout=120, cwd=ROOT)
-        assert proc.returncode == 0, f"{ftype}: {proc.stdout}"
-        assert "identical" in proc.stdout
+        assert_same_on_ranks(scene, ["--set", f'formulation.type="{ftype}"', "--debug"], tmp_path / ftype)
 
 
 @pytest.mark.parametrize("ftype", ["sph", "rlm"])
@@ -427,18 +409,5 @@ def test_eulerian_kernel_is_for_sph_and_rlm_in_a_scene_of_one_body():
 def test_eulerian_kernel_same_answer_on_1_and_3_ranks(tmp_path):
     """The plate in tension with symmetrised SPH and the Eulerian kernel (rebuilt, migrated
     and re-ghosted at every step), 60 steps: history and final state bit for bit."""
-    launcher = os.environ.get("PARSPH_MPIEXEC") or mpiexec()
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    outs = []
-    for ranks in (1, 3):
-        out = tmp_path / f"e{ranks}"
-        cmd = [sys.executable, "-m", "parsph", "run", str(ROOT / "runs" / "plate_tension.toml"), "--out", str(out),
-               "--quiet", "--set", 'formulation.kernel="eulerian"', "--set", "time.max_steps=60"]
-        if ranks > 1:
-            cmd = [launcher, "-n", str(ranks), *cmd]
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
-        assert proc.returncode == 0, proc.stderr
-        outs.append(out)
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *map(str, outs)],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
-    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout
+    assert_same_on_ranks(ROOT / "runs" / "plate_tension.toml",
+                         ["--set", 'formulation.kernel="eulerian"', "--set", "time.max_steps=60"], tmp_path)
