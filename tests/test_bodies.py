@@ -79,7 +79,7 @@ def test_each_body_has_its_material_and_formulation():
     (lambda raw: raw.update(material={"model": "neo_hookean", "density": 1.0}), "remove the top-level [material]"),
     (lambda raw: raw["bodies"][1].update(name="steel"), "bodies[1].name must be a distinct identifier"),
     (lambda raw: raw["bodies"][1]["formulation"].update(type="ulsph", update_every=5),
-     "'ulsph' and formulation.hessian need a scene of one body"),
+     "'ulsph', formulation.hessian and formulation.kernel = 'eulerian' need a scene of one body"),
     (lambda raw: raw["bodies"][0]["material"].pop("density"), "missing required key 'bodies[0].material.density'"),
     (lambda raw: raw["bodies"][1]["material"].update(shear_modulus=1.0),
      "bodies[1].material.shear_modulus does not apply"),
