@@ -128,15 +128,12 @@ def apply_initial_conditions(specs: list, masks: dict, X, gid, u, v, parameters:
     rotation, a displacement gradient, or fields given as expressions of the reference
     position (parsph.expressions, over the scene's `parameters`); masks and arrays cover
     the owned particles (global ids `gid`)."""
-    dim = X.shape[1]
     for i, spec in enumerate(specs):
         sel = np.flatnonzero(masks[spec["group"]])
         rel = X[sel] - np.asarray(spec["center"])
         if spec["type"].endswith("_field"):
             target = v if spec["type"] == "velocity_field" else u
-            for k, text in enumerate(spec["expression"]):
-                field = expressions.Field(f"initial[{i}].expression[{k}]", text, parameters, dim)
-                target[sel, k] = field(X[sel], gid[sel])
+            target[sel] = values(spec, f"initial[{i}]", X[sel], gid[sel], parameters)
         elif spec["type"] == "velocity":
             v[sel] = spec["value"]
         elif spec["type"] == "angular_velocity":

@@ -47,8 +47,9 @@ def _generators(parts: list, where: str, dim: int) -> list:
 
 
 def _block(gens: list, dim: int, comm) -> dict:
-    """Particles cuts[r]..cuts[r+1]-1 of the parts (in part order) on rank r: candidate
-    index "gid", positions "X", measures "measure"."""
+    """Rows cuts[r]..cuts[r+1]-1 of the generators (in order) on rank r: candidate index
+    "gid", positions "X", and the second column of the rows, "measure" (the particles'
+    measures, the integration points' weights)."""
     first = np.cumsum([0] + [g.count for g in gens])
     cuts = block_cuts(first[-1], comm.size)
 
@@ -159,7 +160,7 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
                  f"parts[{p}] lie within half a spacing ({0.5 * min(spacing[q], spacing[p]):g}) of "
                  f"parts[{q}]'s particles (not coincident, so both are kept and the density doubles there)")
     X, measure = owned["X"], owned["measure"]
-    factor = _thickness(scene)
+    factor = config.thickness(scene)
     owned["volume"] = measure * factor
     owned["mass"] = owned["volume"] * body["material"]["density"]
     if any(b["formulation"]["type"] == "kbm" for b in config.bodies(scene)):  # quadrature weights
@@ -173,11 +174,6 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
     return owned
 
 
-def _thickness(scene: dict) -> float:
-    """Volume per unit d-dimensional measure: the cross-section in 1D, the thickness in 2D."""
-    return {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[scene["scene"]["dimension"]]
-
-
 def build_integration_points(scene: dict, comm) -> dict:
     """This rank's blocks of the point sets of integration points the scene's bodies need
     (formulations.galerkin: stress points, Gauss points; global ids body after body):
@@ -187,22 +183,15 @@ def build_integration_points(scene: dict, comm) -> dict:
     kinds = {galerkin.STRESS_POINTS: BoxStressPoints, galerkin.GAUSS_POINTS: BoxGaussPoints}
     out = {}
     for name, kind in kinds.items():
-        gens = [(b, kind(_generators(spec["parts"], "geometry.parts", dim)[0], _thickness(scene)))
-                for b, spec in enumerate(specs) if galerkin.integration_set(spec["formulation"]) == name]
-        if not gens:
+        users = [b for b, spec in enumerate(specs) if galerkin.integration_set(spec["formulation"]) == name]
+        if not users:
             continue
-        first = np.cumsum([0] + [g.count for _, g in gens])
-        start, stop = block_cuts(first[-1], comm.size)[comm.rank: comm.rank + 2]
-        X, volume, body = [np.zeros((0, dim))], [np.zeros(0)], [np.zeros(0, np.int64)]
-        for (b, g), offset in zip(gens, first):
-            lo, hi = max(start, offset), min(stop, offset + g.count)
-            if lo < hi:
-                x, w = g.rows(lo - offset, hi - offset)
-                X.append(x)
-                volume.append(w)
-                body.append(np.full(hi - lo, b, np.int64))
-        out[name] = {"gid": np.arange(start, stop, dtype=np.int64), "X": np.concatenate(X),
-                     "volume": np.concatenate(volume), "body": np.concatenate(body)}
+        gens = [kind(_generators(specs[b]["parts"], "geometry.parts", dim)[0], config.thickness(scene))
+                for b in users]
+        block = _block(gens, dim, comm)  # its "measure" is the points' quadrature weight
+        first = np.cumsum([0] + [g.count for g in gens])
+        out[name] = {"gid": block["gid"], "X": block["X"], "volume": block["measure"],
+                     "body": np.asarray(users, np.int64)[np.searchsorted(first, block["gid"], side="right") - 1]}
     return out
 
 

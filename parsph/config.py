@@ -475,9 +475,7 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         if ic["type"] == "velocity":
             _vector_len(f"initial[{i}].value", ic["value"], dim)
         if ic["type"].endswith("_field"):
-            _vector_len(f"initial[{i}].expression", ic["expression"], dim)
-            for k, text in enumerate(ic["expression"]):
-                expressions.Field(f"initial[{i}].expression[{k}]", text, raw.get("parameters", {}), dim)
+            _check_expressions(f"initial[{i}]", ic["expression"], raw, dim)
         if ic["type"] == "angular_velocity":
             if dim == 1:
                 raise InputError(f"initial[{i}]: angular_velocity needs a 2D or 3D scene")
@@ -663,6 +661,11 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
     return out
 
 
+def thickness(scene: dict) -> float:
+    """Volume per unit d-dimensional measure: the cross-section in 1D, the thickness in 2D."""
+    return {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[scene["scene"]["dimension"]]
+
+
 def bodies(scene: dict) -> list:
     """The scene's bodies: its [[bodies]], or the one body of geometry.parts, [material] and
     [formulation] (named "body")."""
@@ -726,14 +729,19 @@ def validate(raw: dict) -> dict:
     return scene
 
 
+def _check_expressions(path: str, texts: list, raw: dict, dim: int) -> None:
+    """One expression of position per component, each parsed and checked (expressions.Field)."""
+    _vector_len(f"{path}.expression", texts, dim)
+    for k, text in enumerate(texts):
+        expressions.Field(f"{path}.expression[{k}]", text, raw.get("parameters", {}), dim)
+
+
 def _value_or_expression(path: str, item: dict, raw: dict, dim: int) -> None:
     """A condition's `value` vector or its `expression` strings (checked), not both."""
     if (item["value"] is None) == (item["expression"] is None):
         raise InputError(f"{path}: give either value or expression")
     if item["expression"] is not None:
-        _vector_len(f"{path}.expression", item["expression"], dim)
-        for k, text in enumerate(item["expression"]):
-            expressions.Field(f"{path}.expression[{k}]", text, raw.get("parameters", {}), dim)
+        _check_expressions(path, item["expression"], raw, dim)
     else:
         _vector_len(f"{path}.value", item["value"], dim)
 

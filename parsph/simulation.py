@@ -194,12 +194,11 @@ class Simulation:
                 for b in self.bodies:
                     if b.formulation.type in galerkin.TYPES:
                         b.formulation.build(self, b, self.scene["kernel"]["type"])
-        thickness = {1: self.scene["geometry"]["area"], 2: self.scene["geometry"]["thickness"], 3: 1.0}[dim]
         with collective(self.comm):
             parameters = self.scene["parameters"]
             self.bcs = BoundaryConditions(self.scene["bc"], self.groups, self.X[:n], self.gid[:n], parameters)
             self.tractions = Tractions(self.scene["tractions"], self.groups, self.X[:n], self.gid[:n],
-                                       self.measure[:n], thickness, parameters)
+                                       self.measure[:n], config.thickness(self.scene), parameters)
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
         for b in self.bodies:
@@ -564,10 +563,7 @@ class Simulation:
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            if b.formulation.type in galerkin.TYPES:  # over its integration points
-                out["strain"].append(total(b.formulation.strain_energy_terms(self, b)))
-            else:
-                out["strain"].append(total(self.volume[lo:hi] * self.psi[lo:hi]))
+            out["strain"].append(total(b.formulation.strain_energy_terms(self, b)))
             out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
             out["external"].append(acc["external_work"])
         return out

@@ -68,6 +68,10 @@ class NodalFormulation:
         lo, hi = body.lo, body.hi
         return [(sim.X[lo:hi], sim.F[lo:hi], sim.volume[lo:hi])]
 
+    def strain_energy_terms(self, sim, body) -> np.ndarray:
+        """V^0 psi over the body's owned particles."""
+        return sim.volume[body.lo:body.hi] * sim.psi[body.lo:body.hi]
+
     def stages(self, sim, body) -> list:
         """The passes of one force evaluation over `body`'s owned particles of `sim`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0

@@ -17,12 +17,14 @@ import math
 
 import numpy as np
 
-from .lattice import Box
+from .lattice import Box, tensor_rows
 
 
 class BoxGaussPoints:
     """Gauss points of the background cells of a box lattice, as a part generator:
     `count`, `rows(start, stop)` -> (positions, weights)."""
+
+    blockwise = True  # rows(start, stop) builds only those rows
 
     def __init__(self, box: Box, scale: float = 1.0):
         self.scale = scale
@@ -43,7 +45,5 @@ class BoxGaussPoints:
         self.count = math.prod(self.shape)
 
     def rows(self, start: int, stop: int):
-        index = np.unravel_index(np.arange(start, stop), self.shape, order="F")
-        positions = np.column_stack([c[i] for c, i in zip(self.coords, index)])
-        weights = np.prod(np.column_stack([w[i] for w, i in zip(self.weights, index)]), axis=1)
+        positions, weights = tensor_rows(self.coords, self.weights, start, stop)
         return positions, self.scale * weights

@@ -125,10 +125,16 @@ class Box:
         self.count = math.prod(self.shape)
 
     def rows(self, start: int, stop: int):
-        index = np.unravel_index(np.arange(start, stop), self.shape, order="F")
-        positions = np.column_stack([c[i] for c, i in zip(self.coords, index)])
-        volumes = np.prod(np.column_stack([w[i] for w, i in zip(self.weights, index)]), axis=1)
-        return positions, volumes
+        return tensor_rows(self.coords, self.weights, start, stop)
+
+
+def tensor_rows(coords: list, weights: list, start: int, stop: int):
+    """Rows start..stop-1 (first axis fastest) of the tensor product of per-axis points
+    `coords` with per-axis weights `weights`: (positions, products of the weights)."""
+    index = np.unravel_index(np.arange(start, stop), tuple(len(c) for c in coords), order="F")
+    positions = np.column_stack([c[i] for c, i in zip(coords, index)])
+    volumes = np.prod(np.column_stack([w[i] for w, i in zip(weights, index)]), axis=1)
+    return positions, volumes
 
 
 def box(lower, upper, spacing, placement="cell"):

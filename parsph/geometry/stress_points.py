@@ -49,6 +49,8 @@ class BoxStressPoints:
     `rows(start, stop)` -> (positions, quadrature weights) like a part generator, and the
     particles' quadrature weights `particle_weights(index)` (index: lattice rows)."""
 
+    blockwise = True  # rows(start, stop) builds only those rows
+
     def __init__(self, box: Box, scale: float = 1.0):
         """`scale`: factor from the lattice's d-dimensional measure to volume (the
         thickness in 2D, the cross-section in 1D)."""
