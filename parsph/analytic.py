@@ -42,6 +42,29 @@ def free_rod_velocity(x, t, length, wave_speed, initial):
     return 0.5 * (extended(x - wave_speed * t) + extended(x + wave_speed * t))
 
 
+def driven_rod_velocity(x, t, length, wave_speed, speed, duration):
+    """Axial velocity of an elastic rod on [0, length], at rest at first, whose end x = 0
+    moves at `speed` for 0 < t < duration and is free after, the end x = L free throughout
+    ([R §9.2], the rectangular pulse): the pulse g(s) = speed for 0 < s < duration, else 0,
+    runs along the rod and each free end reflects it with its velocity unchanged (zero
+    stress), so
+        v(x, t) = sum over k >= 0 of g(t - (2kL + x)/c) + g(t - (2(k+1)L - x)/c).
+    This holds only if the pulse has left x = 0 when its reflection returns there,
+    2L/c > duration (the end still driven would reflect it otherwise): refused if not."""
+    if 2.0 * length / wave_speed <= duration:
+        raise ValueError(f"the pulse ({duration:g} s) outlasts the round trip 2L/c = "
+                         f"{2.0 * length / wave_speed:g} s: its reflection would meet the driven end")
+    x = np.asarray(x, dtype=float)
+
+    def g(s):
+        return np.where((s > 0) & (s < duration), speed, 0.0)
+
+    v = np.zeros(np.broadcast(x, t).shape)
+    for k in range(int(np.max(t) * wave_speed / (2.0 * length)) + 1):  # the terms that have started
+        v += g(t - (2 * k * length + x) / wave_speed) + g(t - (2 * (k + 1) * length - x) / wave_speed)
+    return v
+
+
 def timoshenko_cantilever(X, length, depth, youngs, poisson, load, plane_strain=True):
     """Displacement (n, 2) and small strain (n, 2, 2) of Timoshenko & Goodier's cantilever
     on [0, L] x [-D/2, D/2] (unit thickness) clamped at x = 0 as the solution prescribes and

@@ -6,11 +6,14 @@ Boundary conditions constrain chosen components of a group's motion:
   displacement  u(t) = value * s(t / ramp), s(x) = x - sin(2 pi x) / (2 pi) for x < 1, else 1
                 (smooth start and stop: zero velocity at both ends of the ramp)
 The value is one vector for the group, or each particle's from expressions of its reference
-position (`expression`, parsph.expressions). The constrained components are excluded from
-the free update; the force the constraint exerts (the reaction) is minus the sum of the
-other forces on those components. Tractions are forces per unit area on a group's
-particles, each taking its share of the surface, measure^((d-1)/d) (its face on a lattice)
-times the thickness in 2D [R eq. 61], ramped as min(t / ramp, 1).
+position (`expression`, parsph.expressions). A condition with a `duration` acts for
+t < duration and then releases the group, which moves freely after (the rectangular velocity
+pulse on a rod's end, [R §9.2]); without one it acts for ever. The components constrained
+at t (`BoundaryConditions.mask`) are excluded from the free update; the force the
+constraint exerts (the reaction) is minus the sum of the other forces on them. Tractions
+are forces per unit area on a group's particles, each taking its share of the surface,
+measure^((d-1)/d) (its face on a lattice) times the thickness in 2D [R eq. 61], ramped as
+min(t / ramp, 1).
 """
 
 from __future__ import annotations
@@ -42,12 +45,17 @@ class Constraint:
     components: np.ndarray
     value: np.ndarray  # (particles, d)
     ramp: float
+    duration: float = math.inf  # released at t >= duration
 
     def __post_init__(self):
         # flat (particle, component) pairs of the constrained entries, and their values
         self.rows = np.repeat(self.index, len(self.components))
         self.cols = np.tile(self.components, len(self.index))
         self.value = np.ascontiguousarray(self.value[:, self.components]).ravel()
+
+    def active(self, t: float) -> bool:
+        """Whether the constraint holds at t (it is released at t >= duration)."""
+        return t < self.duration
 
     def velocity(self, t: float) -> np.ndarray:
         if self.kind == "fixed":
@@ -72,30 +80,48 @@ class Constraint:
 
 
 class BoundaryConditions:
-    """The scene's constraints on this rank's owned particles."""
+    """The scene's constraints on this rank's owned particles; `mask` (owned particles, d)
+    marks the entries constrained at the time of the last set_velocity / set_displacement
+    (at the time t given to the constructor before the first)."""
 
-    def __init__(self, specs: list, masks: dict, X: np.ndarray, gid: np.ndarray, parameters: dict):
+    def __init__(self, specs: list, masks: dict, X: np.ndarray, gid: np.ndarray, parameters: dict,
+                 t: float = 0.0):
         """masks: group name -> bool mask over the owned particles, at reference positions
-        X with global ids gid."""
+        X with global ids gid; `mask` starts as the entries constrained at time t."""
         dim = X.shape[1]
         self.items = []
-        self.mask = np.zeros((len(X), dim), bool)
         for i, spec in enumerate(specs):
             index = np.flatnonzero(masks[spec["group"]])
             comps = np.asarray(spec["components"], np.int64)
             value = values(spec, f"bc[{i}]", X[index], gid[index], parameters)
-            self.items.append(Constraint(spec["type"], index, comps, value, spec["ramp"]))
-            item = self.items[-1]
-            self.mask[item.rows, item.cols] = True
+            self.items.append(Constraint(spec["type"], index, comps, value, spec["ramp"],
+                                         spec.get("duration", math.inf)))
+        self.mask = np.zeros((len(X), dim), bool)
+        self._active = None  # the items self.mask marks
+        self._activate(t)
         # a prescribed velocity or displacement can change the kinetic energy
         self.moving = any(c.kind != "fixed" for c in self.items)
 
+    def active_items(self, t: float) -> tuple:
+        """Indices of the items in force at t."""
+        return tuple(i for i, c in enumerate(self.items) if c.active(t))
+
+    def _activate(self, t: float) -> list:
+        """The items in force at t, with `mask` set to the entries they constrain."""
+        active = self.active_items(t)
+        if active != self._active:
+            self._active = active
+            self.mask[:] = False
+            for i in active:
+                self.mask[self.items[i].rows, self.items[i].cols] = True
+        return [self.items[i] for i in active]
+
     def set_velocity(self, v: np.ndarray, t: float) -> None:
-        for c in self.items:
+        for c in self._activate(t):
             v[c.rows, c.cols] = c.velocity(t)
 
     def set_displacement(self, u: np.ndarray, t: float) -> None:
-        for c in self.items:
+        for c in self._activate(t):
             d = c.displacement(t)
             if d is not None:
                 u[c.rows, c.cols] = d

@@ -204,6 +204,8 @@ BC_KEYS = {
                                            "x, y, z and the parameters per component"),
     "components": Key("intlist", None, doc="constrained components (default: all)"),
     "ramp": Key("float", 0.0, non_negative, "time over which the value ramps up from 0 [s]"),
+    "duration": Key("float", None, positive, "the condition acts for t < duration, then releases the "
+                                             "group (default: for ever) [s]"),
 }
 TRACTION_KEYS = {
     "group": Key("str", REQUIRED, doc="the particles on the loaded surface"),
@@ -414,8 +416,9 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
             bc["value"] = [0.0] * dim
         else:
             _value_or_expression(f"bc[{i}]", bc, raw, dim)
-        if bc["expression"] is None:  # absent, as in scenes written before the key existed
-            del bc["expression"]
+        for key in ("expression", "duration"):
+            if bc[key] is None:  # absent, as in scenes written before the key existed
+                del bc[key]
         scene["bc"].append(bc)
 
     scene["tractions"] = []

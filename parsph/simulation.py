@@ -96,7 +96,7 @@ class Simulation:
         body_acc = scene["loads"]["body_acceleration"]
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
         self.damping = scene["time"]["damping"]
-        self.t = 0.0
+        self.t = restart["clock"]["t"] if restart else 0.0  # the constraints in force depend on it
         self.step_count = 0
         self.updates = 0  # reference updates so far
         self.since_update = 0  # steps since the last one
@@ -196,7 +196,8 @@ class Simulation:
                         b.formulation.build(self, b, self.scene["kernel"]["type"])
         with collective(self.comm):
             parameters = self.scene["parameters"]
-            self.bcs = BoundaryConditions(self.scene["bc"], self.groups, self.X[:n], self.gid[:n], parameters)
+            self.bcs = BoundaryConditions(self.scene["bc"], self.groups, self.X[:n], self.gid[:n], parameters,
+                                          self.t)
             self.tractions = Tractions(self.scene["tractions"], self.groups, self.X[:n], self.gid[:n],
                                        self.measure[:n], config.thickness(self.scene), parameters)
         self.walls.select(self.groups)

@@ -1,6 +1,7 @@
 """Scene input that must be refused (exit code 2, one message naming the key, no traceback)
 or warned about: non-finite numbers, absurd geometry, runaway parameter expressions,
-unreadable scene paths, and parts that overlap without coinciding.
+unreadable scene paths, parts that overlap without coinciding, and a boundary condition's
+duration that is not positive.
 
 Most cases run in process through config.validate / config.load and build_particles on
 MPI.COMM_SELF; a few run the `parsph` command for the exit code and the message.
@@ -367,3 +368,14 @@ def test_overlap_warning_on_two_ranks_is_printed_once(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.count("warning") == 1, proc.stderr
     assert "geometry.parts[0] and geometry.parts[1] overlap: 10 particles of parts[1]" in proc.stderr
+
+
+# ------------------------------------------------------------------ 6. a condition's duration
+@pytest.mark.parametrize("duration", ["0", "-1.0e-3"])
+def test_bc_duration_must_be_positive(duration, tmp_path):
+    """A condition acts for t < duration: a duration of 0 or less would never act."""
+    assert f"bc[0].duration must be > 0 (got {float(duration)})" in refused(SCENE, f"bc.0.duration={duration}")
+    path = tmp_path / "bar.toml"
+    path.write_text(BAR)
+    proc = parsph(["check", path, "--set", f"bc.0.duration={duration}"], timeout=120)
+    assert_bad_input(proc, "bc[0].duration must be > 0")
