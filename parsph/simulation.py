@@ -32,6 +32,7 @@ from mpi4py import MPI
 
 from parsph import config, fields, materials
 from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
+from parsph.collocation import BoundaryCollocation, collocated
 from parsph.diagnostics import global_diagnostics, probe_values
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, total
@@ -109,8 +110,8 @@ class Simulation:
             with collective(comm):
                 apply_initial_conditions(scene["initial"], self.groups, self.X[:n], self.gid[:n], self.u[:n],
                                          self.v[:n], scene["parameters"])
-            self.bcs.set_displacement(self.u[:n], 0.0)
-            self.bcs.set_velocity(self.v[:n], 0.0)
+            self._prescribe_displacement(0.0)
+            self._prescribe_velocity(0.0)
         else:
             clock, totals = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
@@ -200,6 +201,8 @@ class Simulation:
                                           self.t)
             self.tractions = Tractions(self.scene["tractions"], self.groups, self.X[:n], self.gid[:n],
                                        self.measure[:n], config.thickness(self.scene), parameters)
+        efg = any(collocated(b.formulation) for b in self.bodies)
+        self.collocation = BoundaryCollocation(self) if efg and self.scene["bc"] else None
         self.walls.select(self.groups)
         self._omega_hg2 = self._hourglass_frequencies()
         for b in self.bodies:
@@ -379,6 +382,17 @@ class Simulation:
             v *= math.exp(-self.damping * dt)
         v += dt * self.acc
 
+    def _prescribe_velocity(self, t: float) -> None:
+        """The constrained velocities at t (collocated on EFG bodies: parsph.collocation)."""
+        self.bcs.set_velocity(self.v[: self.n_owned], t)
+        if self.collocation:
+            self.collocation.velocity(t)
+
+    def _prescribe_displacement(self, t: float) -> None:
+        self.bcs.set_displacement(self.u[: self.n_owned], t)
+        if self.collocation:
+            self.collocation.displacement(t)
+
     def step(self, t_end: float = math.inf) -> float:
         """Advance one time step (and update the reference if due); returns the step size.
         A step that would reach or pass `t_end` (to a relative 1e-12) is shortened to end
@@ -391,18 +405,18 @@ class Simulation:
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
         u_old = self.u[:n].copy()
-        v_old = self.v[:n].copy() if self.bcs.moving else None
+        v_old = self.v[:n].copy() if self.bcs.moving or self.collocation else None
         f_hg_old = self.f_hg.copy()
         f_ext_old = self._external
         self._kick(0.5 * dt)
-        self.bcs.set_velocity(self.v[:n], self.t + 0.5 * dt)
+        self._prescribe_velocity(self.t + 0.5 * dt)
         self.u[:n] += dt * self.v[:n]
         self.t = t_new
-        self.bcs.set_displacement(self.u[:n], self.t)
+        self._prescribe_displacement(self.t)
         self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
         self.compute_forces()
         self._kick(0.5 * dt)
-        self.bcs.set_velocity(self.v[:n], self.t)
+        self._prescribe_velocity(self.t)
         du = self.u[:n] - u_old
         paper = [b for b in self.bodies if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER]
         if paper:  # not a potential force: its energy is the work it has absorbed

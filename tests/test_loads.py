@@ -139,3 +139,25 @@ def test_scenes_from_before_the_new_keys_restart():
     assert "integration" not in new["formulation"] and not {"expression", "duration"} & set(new["bc"][0])
     assert differing_keys(old, new) == []
 
+
+@pytest.mark.mpi
+def test_pulse_with_efg_restarted_after_the_release_continues_bit_for_bit(tmp_path):
+    """runs/rod_pulse.toml at 1 mm with EFG (the drive collocated through the MLS functions,
+    parsph.collocation): 200 steps on 1 rank against 150 on 2 ranks (the drive released at
+    step 100), checkpointed and continued on 3 ranks: every history series, the external
+    work and energies included, and the final state bit for bit."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, RUNS, parsph
+
+    common = ["--quiet", "--set", "parameters.dx=1e-3", "--set", 'formulation.type="efg"']
+    straight, split = tmp_path / "straight", tmp_path / "split"
+    for out, ranks, extra in ((straight, 1, ["--set", "time.max_steps=200"]),
+                              (split, 2, ["--set", "time.max_steps=150", "--set", "output.checkpoint_every=150"]),
+                              (split, 3, ["--set", "time.max_steps=200", "--restart", "latest"])):
+        proc = parsph(["run", RUNS / "rod_pulse.toml", "--out", out, *common, *extra], ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), str(straight), str(split)],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr

@@ -101,8 +101,9 @@ def _inverse(matrices, active, counts, x_rows, gid_rows, matrix, what):
 
 def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, active, what):
     """(G per pair of `relation` from integration points to particles, per-row data the
-    test gradients need): shape "kbm" (row data S, grad S) or "mls" (M^-1, grad M). Rows
-    not `active` get the identity; an active row with no particle or a singular matrix
+    test gradients need, the shape function values Phi_J(X_q) per pair): shape "kbm" (row
+    data S, grad S; Phi_J = W_J / S) or "mls" (M^-1, grad M; Phi_J = (M^-1 p_J)_0 W_J).
+    Rows not `active` get the identity; an active row with no particle or a singular matrix
     raises InputError naming it."""
     dim = x_rows.shape[1]
     n = len(relation.ptr) - 1
@@ -124,7 +125,7 @@ def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, 
         np.add.at(A, row, np.einsum("pa,pb->pab", x_cols[j] - x_rows[row], gws))
         Ainv = _inverse(A, active, counts, x_rows, gid_rows, "correction matrix A", what)
         G = np.einsum("pba,pb->pa", Ainv[row], gws)
-        return np.ascontiguousarray(G), np.column_stack([S, dS])
+        return np.ascontiguousarray(G), np.column_stack([S, dS]), w / S[row]
     m = dim + 1
     # the basis scaled by a length of the row (the support of its first particle) keeps M
     # well conditioned at any size; the shape functions do not depend on it
@@ -138,7 +139,8 @@ def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, 
     np.add.at(dM, row, grad[:, :, None, None] * np.einsum("pa,pb->pab", p, p)[:, None])
     Minv = _inverse(M, active, counts, x_rows, gid_rows, "moment matrix M", what)
     data = np.concatenate([scale[:, None], Minv.reshape(n, -1), dM.reshape(n, -1)], axis=1)
-    return _mls_gradients(p, w, grad, data[row], dim), data
+    phi = np.einsum("pa,pa->p", Minv[row, 0], p) * w
+    return _mls_gradients(p, w, grad, data[row], dim), data, phi
 
 
 def _mls_gradients(p, w, grad, data, dim):
@@ -179,6 +181,7 @@ class Coupling:
     ptr: np.ndarray  # owned integration points -> particles: trial gradients
     idx: np.ndarray
     G: np.ndarray
+    phi: np.ndarray  # trial shape function values Phi_J(X_q) per pair (boundary collocation)
     base: np.ndarray  # the particle whose displacement is subtracted
     test_ptr: np.ndarray  # owned particles -> integration points (owned and ghosts): test gradients
     test_idx: np.ndarray
@@ -227,9 +230,9 @@ class GalerkinFormulation:
             key = f"{self.shape}_data"
             trial = within_support(name, "particles", A["X"][: points.n_owned], X, gid, support, "cols",
                                    np.where(active, 0, -1)[: points.n_owned], group_cols)
-            G, data = trial_gradients(self.shape, trial, A["X"][: points.n_owned], X, support, kernel, A["gid"],
-                                      active[: points.n_owned], "particle" if name == "particles" else
-                                      name[:-1].replace("_", " "))
+            G, data, phi = trial_gradients(self.shape, trial, A["X"][: points.n_owned], X, support, kernel, A["gid"],
+                                           active[: points.n_owned], "particle" if name == "particles" else
+                                           name[:-1].replace("_", " "))
             if key not in A:
                 A[key] = np.zeros((rows,) + data.shape[1:])
             rows_of_body = np.flatnonzero(active[: points.n_owned])
@@ -244,7 +247,7 @@ class GalerkinFormulation:
                     np.zeros(points.n_owned, np.int64)
             integrates = name != "particles" or self.type == "kbm" or self.points is None
             self.couplings.append(Coupling(
-                name, trial.ptr, trial.idx, G, base, test.ptr, test.idx,
+                name, trial.ptr, trial.idx, G, phi, base, test.ptr, test.idx,
                 test_function_gradients(self.shape, test, X[:n], A["X"], A[key], support, kernel), integrates))
 
     def weights(self, sim, points: str) -> np.ndarray:
