@@ -193,17 +193,19 @@ class GalerkinFormulation:
     """One body's Galerkin formulation: shape functions, integration points, compiled
     stages, strain energy."""
 
-    updated = False  # what the loop asks of every formulation: no updated reference,
-    eta = 0.0  # no Hessian stabilisation, no hourglass control
-    hourglass_form = 0
+    eta = 0.0  # what the loop asks of every formulation: no Hessian stabilisation,
+    hourglass_form = 0  # no hourglass control, no strain trigger of reference updates
     weighted_hessian = True
-    update_every = update_strain = 0
+    update_strain = 0
 
     def __init__(self, options: dict, dim: int, law: int):
         self.type = options["type"]
         self.shape = "kbm" if self.type == "kbm" else "mls"
         self.points = integration_set(options)  # the other set, if any
-        self.kinematics_stress, self.forces = compile_stages(dim, law)
+        # the Eulerian kernel: the updated reference rebuilt at every step (as for sph, rlm)
+        self.updated = options.get("kernel") == "eulerian"
+        self.update_every = 1 if self.updated else 0
+        self.kinematics_stress, self.forces = compile_stages(dim, law, self.updated)
         self.couplings = []
 
     @property
@@ -212,12 +214,12 @@ class GalerkinFormulation:
         return PairOptions(corrected=True, hourglass_form=0, alpha=0.0)
 
     def build(self, sim, body, kernel: str) -> None:
-        """The relations and coefficients of `body` in the reference configuration (once:
-        the kernel is Lagrangian); the row data of the ghost integration points is copied
-        from their owners."""
+        """The relations and coefficients of `body` in the reference configuration: X (once,
+        Lagrangian kernel) or the updated reference X^r (Eulerian kernel, at every step); the
+        row data of the ghost integration points is copied from their owners."""
         P = sim.particles.arrays
         n = sim.n_owned
-        X, support, gid = P["X"], P["support"], P["gid"]
+        X, support, gid = P["Xr" if self.updated else "X"], P["support"], P["gid"]
         mine = sim.body == body.index
         group_rows = np.where(mine, 0, -1)
         group_cols = np.where(mine, 0, -2)
@@ -225,12 +227,13 @@ class GalerkinFormulation:
         self.couplings = []
         for name, points in sets:
             A = points.arrays
+            Y = X if name == "particles" else A["X"]  # the points' positions in the reference
             rows = len(A["gid"])
             active = (A["body"] == body.index) if name != "particles" else mine
             key = f"{self.shape}_data"
-            trial = within_support(name, "particles", A["X"][: points.n_owned], X, gid, support, "cols",
+            trial = within_support(name, "particles", Y[: points.n_owned], X, gid, support, "cols",
                                    np.where(active, 0, -1)[: points.n_owned], group_cols)
-            G, data, phi = trial_gradients(self.shape, trial, A["X"][: points.n_owned], X, support, kernel, A["gid"],
+            G, data, phi = trial_gradients(self.shape, trial, Y[: points.n_owned], X, support, kernel, A["gid"],
                                            active[: points.n_owned], "particle" if name == "particles" else
                                            name[:-1].replace("_", " "))
             if key not in A:
@@ -238,7 +241,7 @@ class GalerkinFormulation:
             rows_of_body = np.flatnonzero(active[: points.n_owned])
             A[key][rows_of_body] = data[rows_of_body]
             points.refresh(key)
-            test = within_support("particles", name, X[:n], A["X"], A["gid"], support, "rows", group_rows[:n],
+            test = within_support("particles", name, X[:n], Y, A["gid"], support, "rows", group_rows[:n],
                                   np.where(active, 0, -2))
             if name == "particles":
                 base = np.arange(points.n_owned, dtype=np.int64)
@@ -248,7 +251,7 @@ class GalerkinFormulation:
             integrates = name != "particles" or self.type == "kbm" or self.points is None
             self.couplings.append(Coupling(
                 name, trial.ptr, trial.idx, G, phi, base, test.ptr, test.idx,
-                test_function_gradients(self.shape, test, X[:n], A["X"], A[key], support, kernel), integrates))
+                test_function_gradients(self.shape, test, X[:n], Y, A[key], support, kernel), integrates))
 
     def weights(self, sim, points: str) -> np.ndarray:
         """Quadrature weights of the integration points of set `points` (zeros: read-out only)."""
@@ -263,18 +266,22 @@ class GalerkinFormulation:
         runs = []
         for coupling in self.couplings:
             if coupling.points == "particles":
-                arrays, (lo, hi), fail = dict(F=sim.F, VP=sim.VP, J=sim.J, psi=sim.psi), (body.lo, body.hi), \
-                    sim.unstable_particle
+                arrays, (lo, hi), fail = dict(fs=sim.fs, F=sim.F, Fr=sim.Fr if self.updated else sim.F, VP=sim.VP,
+                                              J=sim.J, psi=sim.psi), (body.lo, body.hi), sim.unstable_particle
             else:
-                arrays, (lo, hi) = sim.sets[coupling.points].arrays, body.set_rows[coupling.points]
+                A = sim.sets[coupling.points].arrays
+                arrays, (lo, hi) = dict(A, fs=A["F"], Fr=A["F"]), body.set_rows[coupling.points]
                 fail = (lambda q, name=coupling.points: sim.unstable_point(name, q))
             runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points)))
+
+        def displacement():  # from the updated reference, d = u - (X^r - X)
+            np.subtract(sim.u[body.lo:body.hi], sim.shift[body.lo:body.hi], out=sim.d[body.lo:body.hi])
 
         def kinematics_stress():
             for coupling, arrays, lo, hi, fail, weight in runs:
                 bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.d,
-                                             weight, c, sim.no_state, arrays["F"], arrays["VP"], arrays["J"],
-                                             arrays["psi"])
+                                             weight, c, sim.no_state, arrays["fs"], arrays["F"], arrays["Fr"],
+                                             arrays["VP"], arrays["J"], arrays["psi"])
                 if bad >= 0:
                     raise fail(bad)
 
@@ -286,11 +293,12 @@ class GalerkinFormulation:
                                 arrays["VP"], sim.f_int)
 
         prefix = f"{self.points}." if self.points else ""
-        written = ("F", "VP", "J", "psi") + tuple(prefix + k for k in ("F", "VP", "J", "psi") if prefix)
+        written = ("fs", "F", "VP", "J", "psi") + tuple(prefix + k for k in ("F", "VP", "J", "psi") if prefix)
         reads = tuple(("VP",) if self.points is None or self.type == "kbm" else ()) + \
             ((prefix + "VP",) if prefix else ())
-        return [Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
-                Stage("forces", forces, reads=reads, writes=("f_int",))]
+        return [Stage("kinematics+stress", displacement, writes=("d",))] * self.updated + [
+            Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
+            Stage("forces", forces, reads=reads, writes=("f_int",))]
 
     def quadrature(self, sim, body) -> list:
         """[(X, F, w)] of the body's owned integration points, set by set."""
@@ -326,16 +334,18 @@ class GalerkinFormulation:
 _SOURCE_HASH = source_hash(__file__, tlsph.__file__, elastic.__file__, update.__file__)
 
 
-def compile_stages(dim: int, law: int):
-    """(kinematics_stress, forces) for one body's dimension and material law."""
+def compile_stages(dim: int, law: int, updated: bool = False):
+    """(kinematics_stress, forces) for one body's dimension, material law and reference
+    (the initial one, or the updated one of the Eulerian kernel)."""
     source = _SOURCE_HASH
 
     @njit(cache=True)
-    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP, J, psi):
+    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, fs, F, Fr, VP, J, psi):
         """F, stress, w P, J and psi at integration points lo..hi-1; returns the first
         inverted point or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, law, lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP, J, psi)
+        return _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, fs, F, Fr, VP, J,
+                           psi)
 
     @njit(cache=True)
     def forces(lo, hi, ptr, idx, g, VP, f_int):
@@ -355,14 +365,24 @@ def compile_stages(dim: int, law: int):
 
 
 @njit(cache=True, inline="always")
-def _kinematics(dim, law, lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP, J, psi):
+def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, fs, F, Fr, VP, J, psi):
+    """F = I + sum_J (d_J - d_base) (x) G_J at each point; updated reference (Eulerian
+    kernel): that is the motion from the reference fs, F = fs F^r, and the forces take
+    V^0 P F^rT = V^r P^r [V eq. 14]. In the total-Lagrangian case fs and F are one array."""
     P = np.empty((dim, dim))
     S = np.empty((dim, dim))
     C = np.empty((dim, dim))
     Cinv = np.empty((dim, dim))
     first_bad = -1
     for q in range(lo, hi):
-        gradient_row(dim, q, base[q], ptr, idx, G, d, F)
+        gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
+        if updated:
+            for a in range(dim):
+                for b in range(dim):
+                    s = 0.0
+                    for k in range(dim):
+                        s += fs[q, a, k] * Fr[q, k, b]
+                    F[q, a, b] = s
         e = update.update(law, F[q], dim, c, state, q, P, S, C, Cinv)
         J[q] = det(F[q], dim)
         if not (np.isfinite(e) and J[q] > 0.0) and first_bad < 0:
@@ -370,5 +390,10 @@ def _kinematics(dim, law, lo, hi, ptr, idx, G, base, d, weight, c, state, F, VP,
         psi[q] = e
         for a in range(dim):
             for b in range(dim):
-                VP[q, a, b] = weight[q] * P[a, b]
+                s = P[a, b]
+                if updated:
+                    s = 0.0
+                    for k in range(dim):
+                        s += P[a, k] * Fr[q, b, k]
+                VP[q, a, b] = weight[q] * s
     return first_bad
