@@ -132,8 +132,8 @@ SECTIONS: dict[str, dict[str, Key]] = {
                          "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
                          "0 for sph, rlm and kbm (the methods as [R] compares them)"),
         "kernel": Key("str", None, one_of("lagrangian", "eulerian"),
-                      "sph, rlm, efg (nodal): the kernel and neighbours in the reference configuration (lagrangian, "
-                      "the default) or in the current one, rebuilt at every step (eulerian) "
+                      "sph, rlm, kbm, efg (nodal): the kernel and neighbours in the reference configuration "
+                      "(lagrangian, the default) or in the current one, rebuilt at every step (eulerian) "
                       "[R eq. 16-17, Table 2]"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
@@ -612,9 +612,10 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
     if form["type"] in ("kbm", "efg") and form["hourglass"] > 0:
         raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {form['type']} "
                          "(give 0 or leave it out)")
-    if form["kernel"] == "eulerian" and (form["type"] not in ("sph", "rlm", "efg") or form["integration"] == "cells"):
-        raise InputError(f"{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm' and 'efg' with nodal "
-                         f"integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
+    if form["kernel"] == "eulerian" and (form["type"] not in ("sph", "rlm", "kbm", "efg")
+                                         or form["integration"] == "cells"):
+        raise InputError(f"{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'kbm' and 'efg' with "
+                         f"nodal integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
     if form["kernel"] != "eulerian":  # absent: as in scenes written before the key existed
         del form["kernel"]
     if form["type"] != "efg" and form["integration"] is not None:

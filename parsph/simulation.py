@@ -39,7 +39,7 @@ from parsph.exact_sum import Accumulator, Exact, allsum, total
 from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
 from parsph.materials.elastic import first_piola_stresses
-from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, partition
+from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.points import PointSet
@@ -214,10 +214,13 @@ class Simulation:
         carries, work arrays and halo plan; each body's rows of it."""
         dim, fl = self.dim, local.fields
         rows = local.n_owned + local.n_ghost
-        carried = fields.carried({b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies}, name)
+        owners = {b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies}
+        carried = fields.carried(owners | ({"updated"} if self.updated else set()), name)
         arrays = {field: self._initial(field, fl, rows, name) for field in carried}
         arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
                       psi=np.zeros(rows))
+        if self.updated:  # the motion from the updated reference
+            arrays["fs"] = np.zeros((rows, dim, dim))
         body = arrays["body"][: local.n_owned]
         for b in self.bodies:
             b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
@@ -454,12 +457,19 @@ class Simulation:
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
         for b in self.bodies:  # the penalty restarts at 0
             self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
-        if self.comm.size > 1:
+        sets = {}  # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
+        for name, points in self.sets.items():
+            sets[name] = dict(points.migrating(), Xr=points.owned("Xr").copy(), Fr=points.owned("F").copy())
+            for b in self.bodies:
+                lo, hi = b.set_rows[name]
+                if hi > lo:
+                    sets[name]["Xr"][lo:hi] = b.formulation.moved(self, b)
+        if self.comm.size > 1 and not sets:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
                 owned = partition(owned, "Xr", self.comm)
         with collective(self.comm):
-            local = add_ghosts(owned, "Xr", self.comm)
+            local = localize(owned, sets, "Xr", self.comm) if sets else add_ghosts(owned, "Xr", self.comm)
         try:
             self._adopt(local)
         except InputError as exc:  # the configuration, not the input, is at fault

@@ -244,14 +244,17 @@ def test_stress_and_gauss_points_need_one_box_nodal_efg_takes_any_set_no_symmetr
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("method, points, count", [("kbm", "stress_points", 23 * 7),
+                                                   ("kbm_eulerian", "stress_points", 23 * 7),
                                                    ("efg_cells", "gauss_points", 48 * 16)])
 def test_integration_points_across_ranks_and_restarts_bit_for_bit(tmp_path, method, points, count):
     """A 24 x 8 plate (192 particles; 161 stress points, or 768 Gauss points) clamped at the
     left, its right quarter thrown, 50 steps: the same history and final state on 1 and 3
     ranks; stopped at step 20 on 2 ranks and continued from the checkpoint (which holds the
-    integration points' rows) on 3, the same again."""
+    integration points' rows) on 3, the same again. With KBM's Eulerian kernel the stress
+    points move with the body and are repartitioned with the particles at every step."""
     scene = tmp_path / "plate.toml"
-    form = METHODS[method][0].split("=")[1] + ("\nintegration = \"cells\"" if method == "efg_cells" else "")
+    form = {"kbm": '"kbm"', "kbm_eulerian": '"kbm"\nkernel = "eulerian"',
+            "efg_cells": '"efg"\nintegration = "cells"'}[method]
     scene.write_text(PLATE.replace('type = "sph"', f"type = {form}"))
     launcher = os.environ.get("PARSPH_MPIEXEC") or mpiexec()
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -270,8 +273,10 @@ def test_integration_points_across_ranks_and_restarts_bit_for_bit(tmp_path, meth
     [checkpoint] = (split / "checkpoints").glob("step_*.h5")
     with h5py.File(checkpoint) as f:
         assert len(f[f"{points}/X"]) == count and len(f[f"{points}/volume"]) == count
-        along_x = {"kbm": 23, "efg_cells": 48}[method]
+        along_x = {"kbm": 23, "kbm_eulerian": 23, "efg_cells": 48}[method]
         assert np.all(np.diff(f[f"{points}/X"][:, 0].reshape(-1, along_x), axis=1) > 0)  # in gid order
+        if method == "kbm_eulerian":  # moved from X with the body
+            assert not np.array_equal(f[f"{points}/Xr"][:], f[f"{points}/X"][:])
     run(split, 3, "--restart", "latest")
     for other in (three, split):
         proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), str(one), str(other)],

@@ -376,15 +376,15 @@ def test_options_of_corrected_sph_only_are_refused_for_sph_and_rlm(ftype):
 
 # ----------------------------------------------------------------------------- Eulerian kernel
 @pytest.mark.parametrize("ftype, lagrangian_min, eulerian_range", [
-    ("sph", 0.95, (0.0, 0.1)), ("rlm", 0.98, (0.0, 0.7)), ("efg", 0.97, (0.95, 1.0))])
+    ("sph", 0.95, (0.0, 0.1)), ("rlm", 0.98, (0.0, 0.7)), ("kbm", 0.98, (0.95, 1.0)), ("efg", 0.97, (0.95, 1.0))])
 def test_eulerian_kernel_sph_and_rlm_clump_in_tension_efg_and_the_lagrangian_do_not(ftype, lagrangian_min,
                                                                                     eulerian_range):
     """runs/plate_tension.toml: a free plate pulled apart and springing back, to 0.012 s.
     The smallest spacing ratio (nearest current neighbour against the smooth spacing) stays
     above 0.95 with the Lagrangian kernel; with the Eulerian kernel the particles of SPH
-    and RLM pair up under tension [R §3, Table 2], those of nodal EFG do not (here).
-    Measured, Lagrangian / Eulerian: sph 0.952 / 0.044, rlm 0.984 / 0.646, efg 0.978 /
-    0.969."""
+    and RLM pair up under tension [R §3, Table 2], those of KBM (stress points moved with
+    the body) and nodal EFG do not (here). Measured, Lagrangian / Eulerian: sph 0.952 /
+    0.044, rlm 0.984 / 0.646, kbm 0.992 / 0.992, efg 0.978 / 0.969."""
     smallest = {}
     for kernel in ("lagrangian", "eulerian"):
         sim = simulation("plate_tension", [f'formulation.type="{ftype}"', f'formulation.kernel="{kernel}"'])
@@ -396,14 +396,14 @@ def test_eulerian_kernel_sph_and_rlm_clump_in_tension_efg_and_the_lagrangian_do_
     assert eulerian_range[0] < smallest["eulerian"] < eulerian_range[1]
 
 
-def test_eulerian_kernel_is_for_sph_rlm_and_nodal_efg_in_a_scene_of_one_body():
+def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body():
     from parsph.errors import InputError
     from physics import scene_from
 
-    for ftype in ("tlsph", "kbm", "efg"):
+    for ftype in ("tlsph", "efg"):
         extra = ['formulation.integration="cells"'] if ftype == "efg" else []
-        with pytest.raises(InputError, match="kernel = 'eulerian' is available for type = 'sph', 'rlm' and 'efg' "
-                                             "with nodal integration"):
+        with pytest.raises(InputError, match="kernel = 'eulerian' is available for type = 'sph', 'rlm', 'kbm' and "
+                                             "'efg' with nodal integration"):
             scene_from(block_2d().replace("hourglass = 0.0\n", ""),
                        [f'formulation.type="{ftype}"', 'formulation.kernel="eulerian"', *extra])
     assert "kernel" not in scene_from(block_2d(), ['formulation.kernel="lagrangian"'])["formulation"]

@@ -60,6 +60,14 @@ for _set in (STRESS_POINTS, GAUSS_POINTS):
         Field("volume", "scalar", points=_set, doc="quadrature weight [m^3]"),
         Field("body", "id", points=_set, doc="index of the body"),
     )
+# the stress points of an Eulerian kernel move with the body: their updated reference
+register(
+    Field("Xr", "point", points=STRESS_POINTS, owner="updated", initial=lambda X, gid: X,
+          doc="position in the updated reference [m]"),
+    Field("Fr", "tensor", points=STRESS_POINTS, owner="updated",
+          initial=lambda X, gid: np.broadcast_to(np.eye(X.shape[1]), (len(X), X.shape[1], X.shape[1])),
+          doc="deformation gradient of the updated reference"),
+)
 
 
 def integration_set(formulation: dict) -> str | None:
@@ -227,7 +235,7 @@ class GalerkinFormulation:
         self.couplings = []
         for name, points in sets:
             A = points.arrays
-            Y = X if name == "particles" else A["X"]  # the points' positions in the reference
+            Y = X if name == "particles" else A["Xr" if self.updated else "X"]  # positions in the reference
             rows = len(A["gid"])
             active = (A["body"] == body.index) if name != "particles" else mine
             key = f"{self.shape}_data"
@@ -253,6 +261,18 @@ class GalerkinFormulation:
                 name, trial.ptr, trial.idx, G, phi, base, test.ptr, test.idx,
                 test_function_gradients(self.shape, test, X[:n], Y, A[key], support, kernel), integrates))
 
+    def moved(self, sim, body) -> np.ndarray:
+        """Positions of the body's owned stress points in the current configuration: their
+        updated reference moved by the Shepard interpolation of the particles' displacement
+        since it, x_q = X^r_q + sum_J Phi_J(X^r_q) d_J (the Eulerian kernel's update)."""
+        coupling = self.couplings[1]
+        lo, hi = body.set_rows[coupling.points]
+        A = sim.sets[coupling.points].arrays
+        rows = np.repeat(np.arange(len(coupling.ptr) - 1), np.diff(coupling.ptr))
+        move = np.stack([np.bincount(rows, coupling.phi * sim.d[coupling.idx, a], len(coupling.ptr) - 1)
+                         for a in range(sim.dim)], axis=1)
+        return A["Xr"][lo:hi] + move[lo:hi]
+
     def weights(self, sim, points: str) -> np.ndarray:
         """Quadrature weights of the integration points of set `points` (zeros: read-out only)."""
         if points != "particles":
@@ -270,7 +290,8 @@ class GalerkinFormulation:
                                               J=sim.J, psi=sim.psi), (body.lo, body.hi), sim.unstable_particle
             else:
                 A = sim.sets[coupling.points].arrays
-                arrays, (lo, hi) = dict(A, fs=A["F"], Fr=A["F"]), body.set_rows[coupling.points]
+                arrays, (lo, hi) = dict(A, fs=A["fs"], Fr=A["Fr"]) if self.updated else dict(A, fs=A["F"], Fr=A["F"]), \
+                    body.set_rows[coupling.points]
                 fail = (lambda q, name=coupling.points: sim.unstable_point(name, q))
             runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points)))
 
