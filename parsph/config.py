@@ -135,6 +135,14 @@ SECTIONS: dict[str, dict[str, Key]] = {
                       "sph, rlm, kbm, efg (nodal): the kernel and neighbours in the reference configuration "
                       "(lagrangian, the default) or in the current one, rebuilt at every step (eulerian) "
                       "[R eq. 16-17, Table 2]"),
+        "search_every": Key("int", None, positive,
+                            "eulerian: find neighbours and exchange ghosts at most every N steps (default 30, "
+                            "as [R §9.3]), sooner when a particle has moved half the skin; the shape "
+                            "functions are recomputed at every step (kbm, efg: their point relations too, "
+                            "from this rank's points); the result is that of a search at every step"),
+        "skin": Key("float", None, non_negative,
+                    "eulerian: how far beyond the support neighbours are kept between searches, as a "
+                    "fraction of the support (default 0.25)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
     },
@@ -616,6 +624,11 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
                                          or form["integration"] == "cells"):
         raise InputError(f"{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'kbm' and 'efg' with "
                          f"nodal integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
+    for key in ("search_every", "skin"):
+        if form[key] is not None and form["kernel"] != "eulerian":
+            raise InputError(f"{path}.{key} applies to kernel = 'eulerian'")
+        if form[key] is None:  # absent: as in scenes written before the key existed
+            del form[key]
     if form["kernel"] != "eulerian":  # absent: as in scenes written before the key existed
         del form["kernel"]
     if form["type"] != "efg" and form["integration"] is not None:
@@ -726,11 +739,24 @@ def validate(raw: dict) -> dict:
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
             "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
+    if scene["symmetry"] and any(search_every(body["formulation"]) > 1 for body in bodies(scene)):
+        raise InputError("[[symmetry]] planes with formulation.kernel = 'eulerian' need "
+                         "formulation.search_every = 1 (mirror images are made at each search)")
     for b, body in enumerate(bodies(scene)):
         if body["formulation"]["type"] in ("kbm", "efg"):
             _check_integration_points(body, f"bodies[{b}]" if multi else "geometry", scene)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
+
+
+def search_every(form: dict) -> int:
+    """Steps between neighbour searches of a resolved formulation (1: a Lagrangian kernel)."""
+    return form.get("search_every", 30) if form.get("kernel") == "eulerian" else 1
+
+
+def skin(form: dict) -> float:
+    """The skin of an Eulerian kernel's neighbour lists, as a fraction of the support."""
+    return form.get("skin", 0.25) if form.get("kernel") == "eulerian" else 0.0
 
 
 def _check_expressions(path: str, texts: list, raw: dict, dim: int) -> None:

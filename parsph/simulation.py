@@ -24,6 +24,7 @@ that the history, like the particle state, is the same bit for bit on any number
 from __future__ import annotations
 
 import collections
+import contextlib
 import math
 import time
 
@@ -87,6 +88,15 @@ class Simulation:
         self.eta = max(f.eta for f in forms)
         self.hourglass = any(f.hourglass_form for f in forms)
         self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
+        # an Eulerian kernel's neighbour lists and ghost layers: searched at most every
+        # search_every steps, kept while no particle has moved half the skin since
+        self.search_every = config.search_every(specs[0]["formulation"])
+        supports = local.fields["support"][: local.n_owned]
+        self.skin_length = config.skin(specs[0]["formulation"]) * comm.allreduce(
+            float(supports.max()) if len(supports) else 0.0, op=MPI.MAX)
+        self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
+        self._since_search = self.search_every
+        self.searches = 0  # neighbour searches at reference updates so far
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
         if self.updated:
             owners.add("updated")
@@ -140,14 +150,18 @@ class Simulation:
         with collective(self.comm):
             local, mirrors = add_images(local, ref[0], self.scene["symmetry"], self.comm)
             fl, n, dim = local.fields, local.n_owned, self.dim
-            self.decomp = Decomposition(local, self.comm, mirrors)
+            layer2 = self.search_every > 1  # kept to rebuild the ghosts' rows between searches
+            self.decomp = Decomposition(local, self.comm, mirrors, layer2=layer2)
             body = np.searchsorted(self.offsets, local.gid % local.total, side="right") - 1
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.bodies[0].formulation.weighted_hessian)
-        self.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
-        keep = self.decomp.n_rows
+                self.eta, self.bodies[0].formulation.weighted_hessian, skin=self.skin)
+        if layer2:
+            keep = len(local.gid)
+        else:
+            self.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
+            keep = self.decomp.n_rows
         self.n_owned = n
         self.gid = local.gid[:keep]
         self.body = body[:keep]
@@ -450,13 +464,40 @@ class Simulation:
         """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
         V^r = J V^0 (Remark 1); re-decide ownership (parallel RCB of X^r) if the work is
         out of balance, migrate the particles with their state, find ghosts and neighbours
-        in X^r, rebuild the corrections and evaluate the forces in the new reference."""
+        in X^r, rebuild the corrections and evaluate the forces in the new reference. An
+        Eulerian kernel (an update at every step) searches at most every search_every
+        steps, with lists and ghost layers a skin wider, and in between rebuilds the
+        reference on the kept lists (_recommit): the same result as a search every step."""
         start = time.perf_counter()
+        n = self.n_owned
+        for b in self.bodies:  # the penalty restarts at 0
+            self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
+        if self.search_every > 1 and not self._search_due():
+            self._recommit()
+        else:
+            self._search()
+        self._since_search += 1
+        self.stage_seconds["reference update"] += time.perf_counter() - start
+        self.compute_forces()
+        self._external = self.external_force()
+        self.updates += 1
+        self.since_update = 0
+
+    def _search_due(self) -> bool:
+        """Whether the Eulerian kernel's lists must be searched again: search_every steps
+        since the last search, or a particle moved half the skin since (collective)."""
+        if self._since_search >= self.search_every:
+            return True
+        n = self.n_owned
+        moved = self.X[:n] + self.u[:n] - self._searched
+        largest = float(np.sqrt(np.einsum("na,na->n", moved, moved).max())) if n else 0.0
+        return self.comm.allreduce(largest, op=MPI.MAX) > 0.5 * self.skin
+
+    def _search(self) -> None:
+        """The reference update with a new decomposition: ownership, ghosts, neighbours."""
         n = self.n_owned
         owned = dict(self.particles.migrating(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
-        for b in self.bodies:  # the penalty restarts at 0
-            self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         sets = {}  # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
         for name, points in self.sets.items():
             sets[name] = dict(points.migrating(), Xr=points.owned("Xr").copy(), Fr=points.owned("F").copy())
@@ -468,22 +509,67 @@ class Simulation:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
                 owned = partition(owned, "Xr", self.comm)
+        self.skin = self.skin_length if self.search_every > 1 else 0.0
         with collective(self.comm):
-            local = localize(owned, sets, "Xr", self.comm) if sets else add_ghosts(owned, "Xr", self.comm)
-        try:
+            local = localize(owned, sets, "Xr", self.comm, self.skin) if sets else \
+                add_ghosts(owned, "Xr", self.comm, skin=self.skin)
+        with self._update_failure():
             self._adopt(local)
-        except InputError as exc:  # the configuration, not the input, is at fault
+        self._searched = self.Xr[: self.n_owned].copy()
+        self._since_search = 0
+        self.searches += 1
+
+    def _recommit(self) -> None:
+        """The reference update between searches (Eulerian kernel): X^r = x, F^r = F,
+        V^r = J V^0 on the owned particles (and their moved stress points), every carried
+        field refreshed on both ghost layers, then the reference data and the Galerkin
+        relations rebuilt on the kept neighbour lists: the same as _search gives, without
+        repartitioning or finding neighbours."""
+        n = self.n_owned
+        for name, points in self.sets.items():
+            A = points.arrays
+            for b in self.bodies:
+                lo, hi = b.set_rows[name]
+                if hi > lo:
+                    A["Xr"][lo:hi] = b.formulation.moved(self, b)
+            A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
+            points.refresh("Xr", "Fr")
+        self.Xr[:n] = self.X[:n] + self.u[:n]
+        self.Fr[:n] = self.F[:n]
+        self.measure_r[:n] = self.J[:n] * self.measure[:n]
+        self.volume_r[:n] = self.J[:n] * self.volume[:n]
+        self.decomp.refresh_all(*(self.particles.arrays[name] for name in fields.migrating(self.carried)
+                                  if name != "gid"))
+        np.subtract(self.Xr, self.X, out=self.shift)
+        self.d[:] = 0.0
+        self.hg_psi[:] = 0.0
+        with self._update_failure(), collective(self.comm):
+            self.ref = reference.build(
+                self.Xr, self.measure_r, self.volume_r, self.support, self.gid, n, self.decomp.n_rows,
+                self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
+                self.eta, self.bodies[0].formulation.weighted_hessian, candidates=self.ref.candidates,
+                candidate_rev=self.ref.candidate_rev)
+            for b in self.bodies:
+                if b.formulation.type in galerkin.TYPES:
+                    b.formulation.build(self, b, self.scene["kernel"]["type"])
+        if self.collocation:
+            self.collocation = BoundaryCollocation(self)
+        self._omega_hg2 = self._hourglass_frequencies()
+        for b in self.bodies:
+            b.stages = b.formulation.stages(self, b)
+
+    @contextlib.contextmanager
+    def _update_failure(self):
+        """A reference update that fails on the configuration (not the input) says so."""
+        try:
+            yield
+        except InputError as exc:
             error = ParsphError(
                 f"reference update {self.updates + 1} at step {self.step_count}, t = {self.t:.6g} failed: "
                 f"{str(exc).rstrip('.')}. The particles are too disordered for a new reference: update "
                 "earlier (formulation.update_strain), raise the stabilisation or refine the particles")
             error.agreed = getattr(exc, "agreed", False)
             raise error from None
-        self.stage_seconds["reference update"] += time.perf_counter() - start
-        self.compute_forces()
-        self._external = self.external_force()
-        self.updates += 1
-        self.since_update = 0
 
     @property
     def dt(self) -> float:

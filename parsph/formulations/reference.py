@@ -23,9 +23,9 @@ import numpy as np
 
 from parsph.errors import ParsphError
 from parsph.formulations import tlsph
-from parsph.kernels.correction import reference_pairs, reverse_values
+from parsph.kernels.correction import reference_pairs, reverse_index, reverse_values
 from parsph.kernels.hessian import corrected_hessians
-from parsph.neighbors import find_pairs, within_bodies
+from parsph.neighbors import find_pairs, within_bodies, within_support
 
 
 @dataclass
@@ -48,6 +48,8 @@ class ReferenceData:
     gh_rev: np.ndarray
     min_spacing: np.ndarray  # nearest reference neighbour distance of each owned particle
     stiffening: np.ndarray  # how much the stabilisation stiffens each owned particle (>= 1)
+    candidates: object  # neighbour lists with a skin (neighbors.Pairs, rows 0..n_rows-1), kept between searches
+    candidate_rev: np.ndarray | None  # their reverse_index
 
 
 @dataclass(frozen=True)
@@ -61,17 +63,29 @@ class PairOptions:
 
 
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str, body: np.ndarray,
-          options: list, eta: float, weighted_hessian: bool) -> ReferenceData:
+          options: list, eta: float, weighted_hessian: bool, skin: float = 0.0, candidates=None,
+          candidate_rev=None) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
     and layer-1 ghosts) are built to provide the reverse coefficients g_ji. `body` is each
     local particle's body index and options[b] its body's PairOptions; particles of
-    different bodies are not neighbours."""
-    pairs = find_pairs(X, support, gid, n_rows)
-    if len(options) > 1:
-        pairs = within_bodies(pairs, body)
+    different bodies are not neighbours. The neighbours are searched for (with lists `skin`
+    beyond the support, kept as `candidates` with their reverse index `candidate_rev`), or
+    picked from the candidates of an earlier search: the same pairs in the same order."""
+    rev = None
+    if candidates is None:
+        candidates = find_pairs(X, support, gid, n_rows, skin)
+        if len(options) > 1:
+            candidates = within_bodies(candidates, body)
+        candidate_rev = reverse_index(candidates, len(X)) if skin > 0 else None
+    if candidate_rev is None:
+        pairs = candidates
+    else:  # the neighbours among the candidates, and their reverse pairs through the candidates'
+        pairs, keep = within_support(candidates, X, support)
+        renumber = np.cumsum(keep) - 1
+        rev = np.where(candidate_rev[keep] >= 0, renumber[np.maximum(candidate_rev[keep], 0)], -1)
     corrected = np.array([o.corrected for o in options])
     ref = reference_pairs(X, measure, support, gid, pairs, kernel,
-                          None if corrected.all() else corrected[body[:n_rows]])
+                          None if corrected.all() else corrected[body[:n_rows]], rev)
     n = n_owned
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
@@ -122,4 +136,5 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), w=np.ascontiguousarray(ref.w[:end]),
         g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
         g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, hreg=hreg, q=q, q_rev=q_rev, q_sum=q_sum,
-        gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening)
+        gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, candidates=candidates,
+        candidate_rev=candidate_rev)

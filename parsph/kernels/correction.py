@@ -93,11 +93,12 @@ def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
 
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
-    pairs: Pairs, kernel: str, corrected: np.ndarray | None = None,
+    pairs: Pairs, kernel: str, corrected: np.ndarray | None = None, rev: np.ndarray | None = None,
 ) -> ReferencePairs:
     """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
     with `corrected` False get the plain SPH gradient g_ij = -V_j w_ij = V_j grad_i W_ij
-    (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i."""
+    (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i. `rev`: the
+    pairs' reverse_index, if known."""
     dim = positions.shape[1]
     rows = pairs.rows
     row = pairs.row_of_pair()
@@ -135,7 +136,7 @@ def reference_pairs(
     g = np.empty_like(dx)
     g_sum = np.empty((rows, dim))
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
-    rev = reverse_index(pairs, len(positions))
+    rev = reverse_index(pairs, len(positions)) if rev is None else rev
     g_rev = reverse_values(g, rev)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
                           rev=rev)

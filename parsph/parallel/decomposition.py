@@ -180,19 +180,20 @@ class LocalBody:
     sets: dict | None = None  # the other point sets (stress points, ...): name -> LocalBody
 
 
-def add_ghosts(owned: dict, position: str, comm, also: np.ndarray | None = None) -> LocalBody:
+def add_ghosts(owned: dict, position: str, comm, also: np.ndarray | None = None, skin: float = 0.0) -> LocalBody:
     """This rank's owned particles `owned` (by gid) plus two ghost layers found across ranks:
-    neighbours (within the largest kernel support, in the configuration `owned[position]`)
-    of owned particles and of the points at `also` (this rank's owned points of other sets,
-    whose neighbourhoods must be complete too), and neighbours of those. Each rank sends
-    every other rank its particles within two supports of that rank's bounding box."""
+    neighbours (within the largest kernel support plus `skin`, in the configuration
+    `owned[position]`) of owned particles and of the points at `also` (this rank's owned
+    points of other sets, whose neighbourhoods must be complete too), and neighbours of
+    those. Each rank sends every other rank its particles within two reaches of that rank's
+    bounding box."""
     n = len(owned["gid"])
     total = comm.allreduce(n)
     if comm.size == 1:
         return LocalBody(gid=owned["gid"], owner=np.zeros(n, np.int64), n_owned=n, n_ghost=0,
                          total=total, fields=owned)
     x = owned[position] if also is None else np.concatenate([owned[position], also])
-    reach = comm.allreduce(float(owned["support"].max()) if n else 0.0, op=MPI.MAX)
+    reach = comm.allreduce(float(owned["support"].max()) if n else 0.0, op=MPI.MAX) + skin
     cand = nearby(owned, owned[position], 2.0 * reach, comm, region=x)
     layer1 = layer2 = np.zeros(0, np.int64)
     if len(x) and len(cand["gid"]):
@@ -232,19 +233,19 @@ def add_set_ghosts(owned: dict, position: str, particles: np.ndarray, reach: flo
     return LocalBody(gid=fields["gid"], owner=owner, n_owned=n, n_ghost=len(ghost), total=total, fields=fields)
 
 
-def localize(fields: dict, sets: dict, position: str, comm) -> LocalBody:
+def localize(fields: dict, sets: dict, position: str, comm, skin: float = 0.0) -> LocalBody:
     """The particles `fields` (any block of them, by gid) sent to their owners by parallel
     RCB of `fields[position]`, with their ghost layers; and each other point set of `sets`
     (name -> a block of its points, by gid) sent to the owners of the regions holding its
-    points, with its ghosts (in `.sets`)."""
+    points, with its ghosts (in `.sets`); reaches extended by `skin` (add_ghosts)."""
     if not sets:
-        return add_ghosts(partition(fields, position, comm), position, comm)
+        return add_ghosts(partition(fields, position, comm), position, comm, skin=skin)
     owner, cuts = rcb(fields[position], fields["gid"], comm)
     owned = migrate(fields, owner, comm)
     others = {name: migrate(block, assign(cuts, block[position]), comm) for name, block in sets.items()}
     also = np.concatenate([np.zeros((0, owned[position].shape[1]))] + [o[position] for o in others.values()])
-    local = add_ghosts(owned, position, comm, also=also)
-    reach = comm.allreduce(float(owned["support"].max()) if len(owned["gid"]) else 0.0, op=MPI.MAX)
+    local = add_ghosts(owned, position, comm, also=also, skin=skin)
+    reach = comm.allreduce(float(owned["support"].max()) if len(owned["gid"]) else 0.0, op=MPI.MAX) + skin
     local.sets = {name: add_set_ghosts(o, position, owned[position], reach, comm) for name, o in others.items()}
     return local
 
@@ -252,9 +253,11 @@ def localize(fields: dict, sets: dict, position: str, comm) -> LocalBody:
 class Decomposition:
     """This rank's owned and ghost particles and the plan to refresh ghost values."""
 
-    def __init__(self, local: LocalBody, comm, mirrors=None):
+    def __init__(self, local: LocalBody, comm, mirrors=None, layer2: bool = False):
         """`mirrors` (parallel.mirrors.Mirrors): the layer-1 mirror images, refreshed from
-        their sources after the exchange; their owner is -1."""
+        their sources after the exchange; their owner is -1. `layer2`: keep the layer-2
+        ghosts and a plan to refresh them too (refresh_all: an Eulerian kernel rebuilds the
+        ghosts' rows between neighbour searches)."""
         self.comm = comm
         self.mirrors = mirrors
         size, me = comm.size, comm.rank
@@ -280,6 +283,14 @@ class Decomposition:
             wanted = comm.alltoall([layer1[owner1 == r] for r in range(size)])
             self.send_index = {r: np.searchsorted(owned, gids) for r, gids in enumerate(wanted)
                                if len(gids) and r != me}
+        self.recv_rows2, self.send_index2 = {}, {}  # layer 2: rows by owner (in gid order)
+        if layer2 and size > 1:
+            owner2 = local.owner[self.n_rows:]
+            gid2 = local.gid[self.n_rows:]
+            self.recv_rows2 = {int(r): self.n_rows + np.flatnonzero(owner2 == r) for r in np.unique(owner2)}
+            wanted = comm.alltoall([gid2[owner2 == r] for r in range(size)])
+            self.send_index2 = {r: np.searchsorted(owned, gids) for r, gids in enumerate(wanted)
+                                if len(gids) and r != me}
 
     def trim(self) -> None:
         """Forget layer-2 ghosts once reference data is built."""
@@ -293,21 +304,31 @@ class Decomposition:
             if self.mirrors is not None:
                 self.mirrors.fill(arr)
 
-    def _exchange(self, arr: np.ndarray) -> None:
-        """Copy owners' values of `arr` into the ghost slots (MPI)."""
-        if not self.recv_slices and not self.send_index:
+    def refresh_all(self, *arrays: np.ndarray) -> None:
+        """refresh, and the layer-2 ghosts too (a Decomposition made with layer2)."""
+        for arr in arrays:
+            self._exchange(arr)
+            self._exchange(arr, self.recv_rows2, self.send_index2)
+
+    def _exchange(self, arr: np.ndarray, recv=None, send=None) -> None:
+        """Copy owners' values of `arr` into the ghost slots (MPI): layer 1, or the rows of
+        the plan (recv: rank -> rows, send: rank -> owned rows)."""
+        recv = self.recv_slices if recv is None else recv
+        send = self.send_index if send is None else send
+        if not recv and not send:
             return
         requests = []
         buffers = []
-        for r, sl in self.recv_slices.items():
-            buf = np.empty((sl.stop - sl.start,) + arr.shape[1:], arr.dtype)
-            buffers.append((sl, buf))
+        for r, rows in recv.items():
+            count = rows.stop - rows.start if isinstance(rows, slice) else len(rows)
+            buf = np.empty((count,) + arr.shape[1:], arr.dtype)
+            buffers.append((rows, buf))
             requests.append(self.comm.Irecv(buf, source=r, tag=7))
         sends = []
-        for r, index in self.send_index.items():
+        for r, index in send.items():
             data = np.ascontiguousarray(arr[index])
             sends.append(data)
             requests.append(self.comm.Isend(data, dest=r, tag=7))
         MPI.Request.Waitall(requests)
-        for sl, buf in buffers:
-            arr[sl] = buf
+        for rows, buf in buffers:
+            arr[rows] = buf
