@@ -7,10 +7,11 @@ formulations: total-Lagrangian with hourglass control off and on (alpha = 50, bo
 with Hessian's-difference stabilisation (eta = 1), updated-Lagrangian with eta = 1 and
 the reference updated every 3 steps (the paper's stress setting) or every 30, and [R]'s
 symmetrised SPH, RLM, KBM with stress points and EFG with nodal and cell integration
-(µs per particle-step counts particles only, as [R] Tables 5-6 do). Each updated row also gives the time of one reference update per
-particle. Compile time and set-up are
-excluded; each case is timed over --steps steps after a warm-up. Prints a table and writes
-it as JSON.
+and the Eulerian kernel for SPH, RLM, KBM and nodal EFG (neighbours searched at most every
+30 steps, shape functions rebuilt at every step; timed over a quarter of the steps) (µs
+per particle-step counts particles only, as [R] Tables 5-6 do). Each updated row also gives
+the time of one reference update per particle. Compile time and set-up are excluded; each
+case is timed over --steps steps after a warm-up. Prints a table and writes it as JSON.
 
 usage: tools/bench_throughput.py [--particles-2d 40000] [--particles-3d 27000] [--steps 200]
 """
@@ -45,10 +46,13 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
         "material": {"model": "saint_venant_kirchhoff", "density": 1000.0, "youngs_modulus": 1e9,
                      "poisson_ratio": 0.3},
         "formulation": {"hourglass": alpha, "hourglass_form": form, "hessian": eta,
-                        "type": "ulsph" if every else method.removesuffix("_cells"), "update_every": every,
-                        "integration": "cells" if method.endswith("_cells") else "nodal"},
+                        "type": "ulsph" if every else method.split("_")[0], "update_every": every},
         "time": {"end": 1.0},
     }
+    if method.startswith("efg"):
+        raw["formulation"]["integration"] = "cells" if method.endswith("_cells") else "nodal"
+    if method.endswith("_eulerian"):
+        raw["formulation"]["kernel"] = "eulerian"
     return config.validate(raw)
 
 
@@ -78,7 +82,12 @@ CASES = (("tlsph", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0)
          ("tlsph", 0.0, "variational", 1.0, 3), ("tlsph", 0.0, "variational", 1.0, 30),
          ("sph", 0.0, "variational", 0.0, 0), ("rlm", 0.0, "variational", 0.0, 0),
          ("kbm", 0.0, "variational", 0.0, 0), ("efg", 0.0, "variational", 0.0, 0),
-         ("efg_cells", 0.0, "variational", 0.0, 0))
+         ("efg_cells", 0.0, "variational", 0.0, 0), ("sph_eulerian", 0.0, "variational", 0.0, 0),
+         ("rlm_eulerian", 0.0, "variational", 0.0, 0), ("kbm_eulerian", 0.0, "variational", 0.0, 0),
+         ("efg_eulerian", 0.0, "variational", 0.0, 0))
+NAMES = {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM", "efg": "EFG nodal", "efg_cells": "EFG cells",
+         "sph_eulerian": "SPH Eul.", "rlm_eulerian": "RLM Eul.", "kbm_eulerian": "KBM Eul.",
+         "efg_eulerian": "EFG Eul."}
 
 
 def main():
@@ -91,14 +100,15 @@ def main():
     rows = []
     for dim, count in ((2, args.particles_2d), (3, args.particles_3d)):
         for method, alpha, form, eta, every in CASES:
-            rows.append(measure(dim, count, alpha, form, args.steps, eta, every, method))
+            steps = args.steps // 4 if method.endswith("_eulerian") else args.steps
+            rows.append(measure(dim, count, alpha, form, steps, eta, every, method))
             r = rows[-1]
-            kind = f"UL every {every:2d}" if every else {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM", "efg": "EFG nodal",
-                                                              "efg_cells": "EFG cells"}[method].ljust(11)
+            kind = f"UL every {every:2d}" if every else NAMES[method].ljust(11)
             print(f"{r['dim']}D  {r['particles']:7d} particles  {r['neighbours']:5.1f} neighbours  {kind} "
                   f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s} eta {eta:3.1f}  "
                   f"{r['us_per_particle_step']:.3f} us/particle-step"
-                  + (f"  (an update {r['us_per_particle_update']:.2f} us/particle)" if every else ""),
+                  + (f"  (an update {r['us_per_particle_update']:.2f} us/particle)" if r["update_every"]
+                     or method.endswith("_eulerian") else ""),
                   flush=True)
     os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
     with open(args.json, "w") as fh:
