@@ -40,10 +40,8 @@ def within_support(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray,
     reach = float(support.max()) if len(support) else 0.0
     if n == 0 or len(x_cols) == 0:
         return Relation(rows, cols, np.zeros(n + 1, np.int64), np.zeros(0, np.int64))
-    found = cKDTree(x_cols).query_ball_point(x_rows, r=reach)
-    counts = np.fromiter(map(len, found), dtype=np.int64, count=n)
-    i = np.repeat(np.arange(n, dtype=np.int64), counts)
-    j = np.fromiter((k for row in found for k in row), dtype=np.int64, count=int(counts.sum()))
+    near = cKDTree(x_rows).sparse_distance_matrix(cKDTree(x_cols), reach, output_type="ndarray")
+    i, j = near["i"].astype(np.int64), near["j"].astype(np.int64)
     sep = x_cols[j] - x_rows[i]
     dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
     h = support[j] if radius == "cols" else support[i]
