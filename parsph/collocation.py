@@ -86,6 +86,7 @@ class _System:
         values = np.concatenate([e[2] for e in entries])
         matrix = csc_matrix((values, (np.searchsorted(sorted_gids, r), np.searchsorted(sorted_gids, c))),
                             shape=(self.size, self.size))
+        matrix.sort_indices()  # the same storage whatever order the ranks' rows came in
         try:
             self.lu = splu(matrix)
         except RuntimeError:

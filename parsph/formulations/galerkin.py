@@ -42,7 +42,7 @@ from parsph.fields import Field, register
 from parsph.formulations.base import Stage, source_hash
 from parsph.formulations import tlsph
 from parsph.formulations.reference import PairOptions
-from parsph.formulations.tlsph import gradient_row
+from parsph.formulations.tlsph import gradient_row, times_reference, weighted_stress
 from parsph.kernels.correction import MAX_CONDITION
 from parsph.kernels.functions import evaluate
 from parsph.materials import elastic, update
@@ -398,23 +398,11 @@ def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, stat
     for q in range(lo, hi):
         gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
         if updated:
-            for a in range(dim):
-                for b in range(dim):
-                    s = 0.0
-                    for k in range(dim):
-                        s += fs[q, a, k] * Fr[q, k, b]
-                    F[q, a, b] = s
+            times_reference(dim, q, fs, Fr, F)
         e = update.update(law, F[q], dim, c, state, q, P, S, C, Cinv)
         J[q] = det(F[q], dim)
         if not (np.isfinite(e) and J[q] > 0.0) and first_bad < 0:
             first_bad = q
         psi[q] = e
-        for a in range(dim):
-            for b in range(dim):
-                s = P[a, b]
-                if updated:
-                    s = 0.0
-                    for k in range(dim):
-                        s += P[a, k] * Fr[q, b, k]
-                VP[q, a, b] = weight[q] * s
+        weighted_stress(dim, q, weight[q], P, Fr, updated, VP)
     return first_bad

@@ -142,6 +142,32 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
+def times_reference(dim, i, fs, Fr, F):
+    """F[i] = fs[i] F^r[i]: the deformation gradient from the motion since the updated
+    reference [V §3.1]."""
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += fs[i, a, k] * Fr[i, k, b]
+            F[i, a, b] = s
+
+
+@njit(cache=True, inline="always")
+def weighted_stress(dim, i, w, P, Fr, updated, VP):
+    """VP[i] = w P, or w P F^rT = V^r P^r with an updated reference [V eq. 14]."""
+    for a in range(dim):
+        for b in range(dim):
+            if updated:
+                s = 0.0
+                for k in range(dim):
+                    s += P[a, k] * Fr[i, b, k]
+                VP[i, a, b] = w * s
+            else:
+                VP[i, a, b] = w * P[a, b]
+
+
+@njit(cache=True, inline="always")
 def _gradient(dim, lo, hi, ptr, idx, g, d, f):
     for i in range(lo, hi):
         gradient_row(dim, i, i, ptr, idx, g, d, f)
@@ -170,27 +196,14 @@ def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, g
                         fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
         else:
             gradient_row(dim, i, i, ptr, idx, g, d, fs)
-        if updated:  # F = f F^r [V §3.1]
-            for a in range(dim):
-                for b in range(dim):
-                    s = 0.0
-                    for k in range(dim):
-                        s += fs[i, a, k] * Fr[i, k, b]
-                    F[i, a, b] = s
+        if updated:
+            times_reference(dim, i, fs, Fr, F)
         e = update.update(law, F[i], dim, c, state, i, P, S, C, Cinv)
         J[i] = det(F[i], dim)
         if not (math.isfinite(e) and J[i] > 0.0) and first_bad < 0:
             first_bad = i
         psi[i] = e
-        for a in range(dim):
-            for b in range(dim):
-                if updated:  # V0 P F^rT [V eq. 14]
-                    s = 0.0
-                    for k in range(dim):
-                        s += P[a, k] * Fr[i, b, k]
-                    VP[i, a, b] = volume[i] * s
-                else:
-                    VP[i, a, b] = volume[i] * P[a, b]
+        weighted_stress(dim, i, volume[i], P, Fr, updated, VP)
         if hourglass == HOURGLASS_VARIATIONAL:
             # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
             phi = 0.0
