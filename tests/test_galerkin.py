@@ -384,3 +384,15 @@ def test_clamp_is_collocated_through_the_mls_functions_kbm_takes_particle_values
     assert np.abs(approximation(sim.u) - u_bar[clamp]).max() < 1e-12 * scale_u
     assert np.abs(approximation(sim.v) - v_bar[clamp]).max() < 1e-12 * scale_v
     assert np.abs(sim.u[clamp] - u_bar[clamp]).max() > 0.01 * scale_u
+
+
+@pytest.mark.mpi
+def test_eulerian_efg_with_a_collocated_clamp_same_on_1_and_3_ranks(tmp_path):
+    """The clamped plate of the test above with nodal EFG and the Eulerian kernel: the
+    clamp's collocation system rebuilt with the shape functions at every step (velocities
+    only), 50 steps: history and final state bit for bit on 1 and 3 ranks."""
+    from conftest import assert_same_on_ranks
+
+    scene = tmp_path / "plate.toml"
+    scene.write_text(PLATE.replace('type = "sph"', 'type = "efg"\nkernel = "eulerian"'))
+    assert_same_on_ranks(scene, [], tmp_path)
