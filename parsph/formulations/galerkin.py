@@ -1,6 +1,8 @@
-"""Meshfree Galerkin methods with a Lagrangian kernel: F and the stress at integration
-points, forces from test-function gradients [R §4.3-5.3; eq. 26-32, 37-43, 60, 63-69;
-implementation forms: DATA_SHEET §A].
+"""Meshfree Galerkin methods: F and the stress at integration points, forces from
+test-function gradients [R §4.3-5.3; eq. 26-32, 37-43, 60, 63-69; implementation forms:
+DATA_SHEET §A]; a Lagrangian kernel, or for kbm and nodal efg an Eulerian one [R Table 2]
+(the same sums in the updated reference, rebuilt at every step; the stress points move with
+the body, `moved`).
 
   kbm          Krongauz-Belytschko: trial gradients G_J = A^-T grad W^S_J corrected from
                the Shepard functions W^S_J = W_J / S, S = sum_K W_K [R eq. 28-32]; Shepard
@@ -21,9 +23,9 @@ particle) or of its first particle (sum_J G_J = 0 to round-off: a rigid translat
 F = I exactly). F and the stress are evaluated at the particles in every method (the time
 step and the read-outs use them). The test gradient of particle I at a point q needs sums
 over q's whole neighbourhood (S, grad S; or the MLS moment matrix and its gradient): the
-owner of q computes them and they are copied to q's ghosts once. sum_I grad N_I = 0 at every
-q, so linear momentum is conserved; the sums run over particles, then the other set, each
-in global-id order.
+owner of q computes them and they are copied to q's ghosts at each build. sum_I grad N_I = 0
+at every q, so linear momentum is conserved; the sums run over particles, then the other
+set, each in global-id order.
 
 MLS gradient (DATA_SHEET §A), with the basis centred at X_q and scaled by a length l of q,
 p_J = (1, (X_J - X_q) / l), M = sum_J W_J p_J p_J^T, gamma = M^-1 e_0:
@@ -290,8 +292,8 @@ class GalerkinFormulation:
                                               J=sim.J, psi=sim.psi), (body.lo, body.hi), sim.unstable_particle
             else:
                 A = sim.sets[coupling.points].arrays
-                arrays, (lo, hi) = dict(A, fs=A["fs"], Fr=A["Fr"]) if self.updated else dict(A, fs=A["F"], Fr=A["F"]), \
-                    body.set_rows[coupling.points]
+                arrays = A if self.updated else dict(A, fs=A["F"], Fr=A["F"])  # total-Lagrangian: F^r = I
+                lo, hi = body.set_rows[coupling.points]
                 fail = (lambda q, name=coupling.points: sim.unstable_point(name, q))
             runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points)))
 
