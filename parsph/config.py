@@ -107,6 +107,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "poisson_ratio": Key("float", None, in_range(-1.0, 0.5, True, True)),
         "shear_modulus": Key("float", None, positive, "[Pa]"),
         "bulk_modulus": Key("float", None, positive, "[Pa]"),
+        "c1": Key("float", None, positive, "mooney_rivlin: c1 of [R eq. 18] [Pa]"),
+        "c2": Key("float", None, non_negative, "mooney_rivlin: c2 of [R eq. 18] [Pa]"),
+        "lambda": Key("float", None, positive, "mooney_rivlin: lambda of [R eq. 18] [Pa]"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS),
@@ -380,7 +383,8 @@ def _validate_material(path: str, mat: dict) -> None:
             raise InputError(f"missing required key '{path}.{k}' for model '{law.name}'")
     for k in ELASTIC_KEYS:
         if k not in law.takes and mat[k] is not None:
-            raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {' and '.join(law.takes)})")
+            takes = ", ".join(law.takes[:-1]) + " and " + law.takes[-1]
+            raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {takes})")
 
 
 def _validate_groups(raw: Any, dim: int) -> dict:

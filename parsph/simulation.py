@@ -654,7 +654,7 @@ class Simulation:
             rows = slice(None) if len(self.bodies) == 1 else np.flatnonzero(body == b.index)
             part = np.empty_like(F[rows])
             c = b.constants
-            first_piola_stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, c.lam, c.mu, c.bulk, part)
+            first_piola_stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, *c.values, part)
             P[rows] = part
         return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
 

@@ -55,10 +55,16 @@ def energy_gradient(sim: Simulation, energy, i: int, eps: float) -> np.ndarray:
     return out
 
 
+def elastic_constants(model: str) -> str:
+    """The [material] lines of a law's constants (small-strain moduli of about 1e6 Pa)."""
+    return {"neo_hookean_nearly_incompressible": "shear_modulus = 4.0e5\nbulk_modulus = 2.0e6",
+            "mooney_rivlin": "c1 = 3.5e5\nc2 = 5.0e4\nlambda = 1.0e6"}.get(
+        model, "youngs_modulus = 1.0e6\npoisson_ratio = 0.3")
+
+
 def block_2d(model="saint_venant_kirchhoff", hourglass=0.0, form="variational", extra=""):
     """A small free 2D block scene (text), 10 x 6 particles."""
-    elastic = ("shear_modulus = 4.0e5\nbulk_modulus = 2.0e6" if model.endswith("incompressible")
-               else "youngs_modulus = 1.0e6\npoisson_ratio = 0.3")
+    elastic = elastic_constants(model)
     return f"""
 [scene]
 name = "block"

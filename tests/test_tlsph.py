@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physics import block_2d, run_until, simulation
+from physics import block_2d, elastic_constants, run_until, simulation
 
-MODELS = ["saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible"]
+MODELS = ["saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible", "mooney_rivlin"]
 
 
 def random_set_2d(hourglass=0.0, model="saint_venant_kirchhoff"):
@@ -41,9 +41,7 @@ end = 1.0
 
 
 def cube(model):
-    elastic = ("shear_modulus = 4.0e5\nbulk_modulus = 2.0e6" if model.endswith("incompressible")
-               else "youngs_modulus = 1.0e6\npoisson_ratio = 0.3")
-    return CUBE_3D.replace("MODEL", model).replace("ELASTIC", elastic)
+    return CUBE_3D.replace("MODEL", model).replace("ELASTIC", elastic_constants(model))
 
 
 def deform(sim, H):

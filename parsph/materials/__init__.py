@@ -20,47 +20,44 @@ class Law:
     doc: str = ""
 
 
-ELASTIC_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "bulk_modulus")
+ELASTIC_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "bulk_modulus", "c1", "c2", "lambda")
 LAWS = {law.name: law for law in (
     Law("saint_venant_kirchhoff", 0, ("youngs_modulus", "poisson_ratio"), doc="[G eq. 19]"),
     Law("neo_hookean", 1, ("youngs_modulus", "poisson_ratio"), doc="[G eq. 44]"),
     Law("neo_hookean_nearly_incompressible", 2, ("shear_modulus", "bulk_modulus"), doc="[V §2.4.1]"),
+    Law("mooney_rivlin", 3, ("c1", "c2", "lambda"), doc="[R eq. 18]"),
 )}
 
 
 @dataclass(frozen=True)
 class Constants:
-    """A law's constants as its compiled update reads them, and the moduli the formulation
-    and the time step need."""
+    """A law's constants as its compiled update reads them, and its small-strain moduli,
+    which the formulation and the time step need."""
 
-    values: np.ndarray  # (lam, mu, bulk) for the hyperelastic laws
+    values: np.ndarray  # (lam, mu, bulk); (lambda, c1, c2) for Mooney-Rivlin
+    lam: float  # small-strain Lame constants and bulk modulus
+    mu: float
+    bulk: float
     youngs: float  # Young's modulus (hourglass forces)
     wave_speed: float  # reference P-wave speed sqrt((lam + 2 mu) / rho)
-
-    @property
-    def lam(self) -> float:
-        return float(self.values[0])
-
-    @property
-    def mu(self) -> float:
-        return float(self.values[1])
-
-    @property
-    def bulk(self) -> float:
-        return float(self.values[2])
 
 
 def constants(material: dict) -> Constants:
     """The constants of a resolved `material` table."""
-    rho = material["density"]
-    if material["model"] == "neo_hookean_nearly_incompressible":
-        mu, k = material["shear_modulus"], material["bulk_modulus"]
-        lam = k - 2.0 * mu / 3.0
-        youngs = 9.0 * k * mu / (3.0 * k + mu)
-    else:
+    rho, model = material["density"], material["model"]
+    if model in ("saint_venant_kirchhoff", "neo_hookean"):
         youngs, nu = material["youngs_modulus"], material["poisson_ratio"]
         lam = youngs * nu / ((1 + nu) * (1 - 2 * nu))
         mu = youngs / (2 * (1 + nu))
         k = lam + 2.0 * mu / 3.0
-    return Constants(values=np.array([lam, mu, k]), youngs=youngs,
+        values = (lam, mu, k)
+    else:
+        if model == "mooney_rivlin":  # psi = lambda (ln J)^2 under dilation: K = 2 lambda
+            mu, k = material["c1"] + material["c2"], 2.0 * material["lambda"]
+        else:
+            mu, k = material["shear_modulus"], material["bulk_modulus"]
+        lam = k - 2.0 * mu / 3.0
+        youngs = 9.0 * k * mu / (3.0 * k + mu)
+        values = (material["lambda"], material["c1"], material["c2"]) if model == "mooney_rivlin" else (lam, mu, k)
+    return Constants(values=np.array(values), lam=lam, mu=mu, bulk=k, youngs=youngs,
                      wave_speed=math.sqrt((lam + 2 * mu) / rho))

@@ -1,6 +1,6 @@
 """Hyperelastic laws evaluated per particle inside the compiled kernels.
 
-Each law takes F (dim x dim), writes the first Piola-Kirchhoff stress P = F S and returns
+Each law takes F (dim x dim), writes the first Piola-Kirchhoff stress P and returns
 the strain-energy density psi per unit reference volume. Missing dimensions (plane strain
 in 2D, uniaxial strain in 1D) are held at unit stretch, so 3D invariants such as tr C get
 (3 - dim) added. A law returns NaN for J <= 0 (an inverted particle), which the caller
@@ -17,10 +17,12 @@ from numba import njit
 SAINT_VENANT_KIRCHHOFF = 0
 NEO_HOOKEAN = 1
 NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE = 2
+MOONEY_RIVLIN = 3
 MODEL_IDS = {
     "saint_venant_kirchhoff": SAINT_VENANT_KIRCHHOFF,
     "neo_hookean": NEO_HOOKEAN,
     "neo_hookean_nearly_incompressible": NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE,
+    "mooney_rivlin": MOONEY_RIVLIN,
 }
 
 
@@ -80,7 +82,8 @@ def first_piola(F, S, dim, P):
 
 @njit(cache=True, inline="always")
 def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
-    """P = F S for the law `model`; returns psi (NaN if J <= 0).
+    """P for the law `model` with its three constants (lam, mu, bulk; for Mooney-Rivlin
+    lambda, c1, c2); returns psi (NaN if J <= 0).
 
     Saint Venant-Kirchhoff [G eq. 19] (with the standard lam tr(E) I term):
         S = lam tr(E) I + 2 mu E,  psi = lam/2 tr(E)^2 + mu E:E,  E = (C - I)/2.
@@ -89,7 +92,13 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
     Nearly incompressible neo-Hookean [V §2.4.1] (Bonet & Wood):
         S = mu J^(-2/3) (I - I1/3 C^-1) + bulk J (J - 1) C^-1,
         psi = mu/2 (J^(-2/3) I1 - 3) + bulk/2 (J - 1)^2.
+    Compressible Mooney-Rivlin [R eq. 18], Kirchhoff stress from B = F F^T:
+        tau = (c1 + c2 I1) B - c2 B^2 - (c1 I3^(1/3) + 2 c2 I3^(2/3) - lambda ln I3) I,
+        psi = c1/2 (I1 - 3 I3^(1/3)) + c2/2 (I2 - 3 I3^(2/3)) + lambda/4 (ln I3)^2
+    (the energy whose derivative is [R]'s stress: 2 dpsi/dI1 = c1, 2 dpsi/dI2 = c2).
     """
+    if model == MOONEY_RIVLIN:
+        return _mooney_rivlin(F, dim, lam, mu, bulk, P, S, C, Cinv)
     right_cauchy_green(F, dim, C)
     if model == SAINT_VENANT_KIRCHHOFF:
         tr = 0.0
@@ -124,6 +133,44 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
             S[a, b] = mu * jm23 * ((1.0 if a == b else 0.0) - i1 / 3.0 * Cinv[a, b]) + vol * Cinv[a, b]
     first_piola(F, S, dim, P)
     return 0.5 * mu * (jm23 * i1 - 3.0) + 0.5 * bulk * (J - 1.0) ** 2
+
+
+@njit(cache=True, inline="always")
+def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
+    """[R eq. 18] (see stress): P = tau F^-T; out of the model's dimensions B is 1."""
+    J = det(F, dim)
+    if not J > 0.0:
+        return math.nan
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += F[a, k] * F[b, k]
+            B[a, b] = s
+    i1 = float(3 - dim)
+    trace_b2 = float(3 - dim)
+    for a in range(dim):
+        i1 += B[a, a]
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += B[a, k] * B[k, b]
+            B2[a, b] = s
+        trace_b2 += B2[a, a]
+    i2 = 0.5 * (i1 * i1 - trace_b2)
+    i3 = J * J
+    ln_i3 = math.log(i3)
+    cube = i3 ** (1.0 / 3.0)
+    q = c1 * cube + 2.0 * c2 * cube * cube - lam * ln_i3
+    inverse(F, dim, Finv)
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                tau = (c1 + c2 * i1) * B[a, k] - c2 * B2[a, k] - (q if a == k else 0.0)
+                s += tau * Finv[b, k]
+            P[a, b] = s
+    return 0.5 * c1 * (i1 - 3.0 * cube) + 0.5 * c2 * (i2 - 3.0 * cube * cube) + 0.25 * lam * ln_i3 * ln_i3
 
 
 @njit(cache=True)

@@ -29,7 +29,8 @@ def update(law, F, dim, c, state, i, P, S, C, Cinv):
 def stiffening(law, s_max, J):
     """Tangent stiffening of the law under the total deformation (>= 1): (3 s_max^2 - 1)/2
     under stretch for Saint Venant-Kirchhoff, 1 - ln J under compression for the
-    neo-Hookean laws; inf for an inverted point."""
+    neo-Hookean and Mooney-Rivlin laws (their bulk terms, which set the wave speed); inf
+    for an inverted point."""
     if law == elastic.SAINT_VENANT_KIRCHHOFF:
         return max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
     return max(1.0, 1.0 - math.log(J)) if J > 0 else math.inf
