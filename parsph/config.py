@@ -23,7 +23,7 @@ from typing import Any, Callable
 
 from parsph import expressions, quantities
 from parsph.errors import InputError
-from parsph.materials import ELASTIC_KEYS, LAWS
+from parsph.materials import LAW_KEYS, LAWS
 
 REQUIRED = object()
 
@@ -110,6 +110,8 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "c1": Key("float", None, positive, "mooney_rivlin: c1 of [R eq. 18] [Pa]"),
         "c2": Key("float", None, non_negative, "mooney_rivlin: c2 of [R eq. 18] [Pa]"),
         "lambda": Key("float", None, positive, "mooney_rivlin: lambda of [R eq. 18] [Pa]"),
+        "tait_b": Key("float", None, positive, "tait_fluid: B of p = B ((rho/rho0)^gamma - 1) [R eq. 77] [Pa]"),
+        "tait_gamma": Key("float", None, positive, "tait_fluid: gamma of [R eq. 77]"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS),
@@ -381,7 +383,7 @@ def _validate_material(path: str, mat: dict) -> None:
     for k in law.takes:
         if mat[k] is None:
             raise InputError(f"missing required key '{path}.{k}' for model '{law.name}'")
-    for k in ELASTIC_KEYS:
+    for k in LAW_KEYS:
         if k not in law.takes and mat[k] is not None:
             takes = ", ".join(law.takes[:-1]) + " and " + law.takes[-1]
             raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {takes})")

@@ -305,7 +305,7 @@ class Simulation:
         for b in self.bodies:  # in row order: the first particle with the smallest step
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
-                self._omega_hg2, b.constants.wave_speed, b.law.law_id, self.dim)
+                self._omega_hg2, b.constants.wave_speed, b.law.law_id, b.constants.values, self.dim)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first

@@ -58,7 +58,8 @@ def energy_gradient(sim: Simulation, energy, i: int, eps: float) -> np.ndarray:
 def elastic_constants(model: str) -> str:
     """The [material] lines of a law's constants (small-strain moduli of about 1e6 Pa)."""
     return {"neo_hookean_nearly_incompressible": "shear_modulus = 4.0e5\nbulk_modulus = 2.0e6",
-            "mooney_rivlin": "c1 = 3.5e5\nc2 = 5.0e4\nlambda = 1.0e6"}.get(
+            "mooney_rivlin": "c1 = 3.5e5\nc2 = 5.0e4\nlambda = 1.0e6",
+            "tait_fluid": "tait_b = 4.704e5\ntait_gamma = 7.0"}.get(
         model, "youngs_modulus = 1.0e6\npoisson_ratio = 0.3")
 
 

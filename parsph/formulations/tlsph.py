@@ -384,16 +384,15 @@ def principal_stretches(F, dim):
 
 
 @njit(cache=True)
-def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, law, dim):
+def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, law, c, dim):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
     the motion from the reference fs (the current spacing shrinks with it), and c_i the
-    reference P-wave speed times the law's stiffening under the total F:
-    (3 s_max^2 - 1)/2 under stretch for Saint Venant-Kirchhoff, 1 - ln J under compression
-    for the neo-Hookean laws (their tangent moduli), and sqrt(stab_i) for the stiffening by
-    Hessian stabilisation (formulations.reference). The strain max |ln s| over the
+    reference P-wave speed times the square root of the law's stiffening under the total F
+    (materials.update.stiffening, from the law's constants c) and of the stiffening by
+    Hessian stabilisation, stab_i (formulations.reference). The strain max |ln s| over the
     principal stretches of fs is the distortion measure of the adaptive reference update.
     In the total-Lagrangian formulation fs and F are the same array. Also returns the first
     particle with the smallest step (-1 if there is none); the first flattened or inverted
@@ -404,7 +403,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed,
     for i in range(lo, hi):
         s_min, s_max = principal_stretches(F[i], dim)
         f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim)
-        stiffening = update.stiffening(law, s_max, J[i])
+        stiffening = update.stiffening(law, s_max, J[i], c)
         length = min_spacing[i] * min(1.0, f_min)
         if not (length > 0.0 and stiffening < np.inf):
             return 0.0, np.inf, i  # no stable step

@@ -15,17 +15,19 @@ import numpy as np
 class Law:
     name: str
     law_id: int  # the compiled update's id (materials.update)
-    takes: tuple  # the material keys it needs (the others of ELASTIC_KEYS are refused)
+    takes: tuple  # the material keys it needs (the others of LAW_KEYS are refused)
     state: tuple = ()  # names of the registered fields it carries per point
     doc: str = ""
 
 
-ELASTIC_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "bulk_modulus", "c1", "c2", "lambda")
+LAW_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "bulk_modulus", "c1", "c2", "lambda", "tait_b",
+            "tait_gamma")
 LAWS = {law.name: law for law in (
     Law("saint_venant_kirchhoff", 0, ("youngs_modulus", "poisson_ratio"), doc="[G eq. 19]"),
     Law("neo_hookean", 1, ("youngs_modulus", "poisson_ratio"), doc="[G eq. 44]"),
     Law("neo_hookean_nearly_incompressible", 2, ("shear_modulus", "bulk_modulus"), doc="[V §2.4.1]"),
     Law("mooney_rivlin", 3, ("c1", "c2", "lambda"), doc="[R eq. 18]"),
+    Law("tait_fluid", 4, ("tait_b", "tait_gamma"), doc="[R eq. 77]"),
 )}
 
 
@@ -34,7 +36,7 @@ class Constants:
     """A law's constants as its compiled update reads them, and its small-strain moduli,
     which the formulation and the time step need."""
 
-    values: np.ndarray  # (lam, mu, bulk); (lambda, c1, c2) for Mooney-Rivlin
+    values: np.ndarray  # (lam, mu, bulk); (lambda, c1, c2) for Mooney-Rivlin; (B, gamma, 0) for Tait
     lam: float  # small-strain Lame constants and bulk modulus
     mu: float
     bulk: float
@@ -54,10 +56,14 @@ def constants(material: dict) -> Constants:
     else:
         if model == "mooney_rivlin":  # psi = lambda (ln J)^2 under dilation: K = 2 lambda
             mu, k = material["c1"] + material["c2"], 2.0 * material["lambda"]
+        elif model == "tait_fluid":  # dp / d(rho / rho0) = gamma B at rest; no shear stiffness
+            mu, k = 0.0, material["tait_gamma"] * material["tait_b"]
         else:
             mu, k = material["shear_modulus"], material["bulk_modulus"]
         lam = k - 2.0 * mu / 3.0
         youngs = 9.0 * k * mu / (3.0 * k + mu)
-        values = (material["lambda"], material["c1"], material["c2"]) if model == "mooney_rivlin" else (lam, mu, k)
+        values = {"mooney_rivlin": lambda: (material["lambda"], material["c1"], material["c2"]),
+                  "tait_fluid": lambda: (material["tait_b"], material["tait_gamma"], 0.0)}.get(
+            model, lambda: (lam, mu, k))()
     return Constants(values=np.array(values), lam=lam, mu=mu, bulk=k, youngs=youngs,
                      wave_speed=math.sqrt((lam + 2 * mu) / rho))

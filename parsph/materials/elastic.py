@@ -18,11 +18,13 @@ SAINT_VENANT_KIRCHHOFF = 0
 NEO_HOOKEAN = 1
 NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE = 2
 MOONEY_RIVLIN = 3
+TAIT_FLUID = 4
 MODEL_IDS = {
     "saint_venant_kirchhoff": SAINT_VENANT_KIRCHHOFF,
     "neo_hookean": NEO_HOOKEAN,
     "neo_hookean_nearly_incompressible": NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE,
     "mooney_rivlin": MOONEY_RIVLIN,
+    "tait_fluid": TAIT_FLUID,
 }
 
 
@@ -83,7 +85,7 @@ def first_piola(F, S, dim, P):
 @njit(cache=True, inline="always")
 def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
     """P for the law `model` with its three constants (lam, mu, bulk; for Mooney-Rivlin
-    lambda, c1, c2); returns psi (NaN if J <= 0).
+    lambda, c1, c2; for Tait B, gamma, -); returns psi (NaN if J <= 0).
 
     Saint Venant-Kirchhoff [G eq. 19] (with the standard lam tr(E) I term):
         S = lam tr(E) I + 2 mu E,  psi = lam/2 tr(E)^2 + mu E:E,  E = (C - I)/2.
@@ -96,9 +98,14 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
         tau = (c1 + c2 I1) B - c2 B^2 - (c1 I3^(1/3) + 2 c2 I3^(2/3) - lambda ln I3) I,
         psi = c1/2 (I1 - 3 I3^(1/3)) + c2/2 (I2 - 3 I3^(2/3)) + lambda/4 (ln I3)^2
     (the energy whose derivative is [R]'s stress: 2 dpsi/dI1 = c1, 2 dpsi/dI2 = c2).
+    Tait's fluid [R eq. 77], rho / rho0 = 1 / J:
+        p = B (J^-gamma - 1),  P = -p J F^-T,  psi = B ((J^(1-gamma) - 1) / (gamma - 1) + J - 1)
+    (dpsi/dJ = -p; no shear stiffness: an isochoric motion is stress-free).
     """
     if model == MOONEY_RIVLIN:
         return _mooney_rivlin(F, dim, lam, mu, bulk, P, S, C, Cinv)
+    if model == TAIT_FLUID:
+        return _tait(F, dim, lam, mu, P, Cinv)
     right_cauchy_green(F, dim, C)
     if model == SAINT_VENANT_KIRCHHOFF:
         tr = 0.0
@@ -171,6 +178,22 @@ def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
                 s += tau * Finv[b, k]
             P[a, b] = s
     return 0.5 * c1 * (i1 - 3.0 * cube) + 0.5 * c2 * (i2 - 3.0 * cube * cube) + 0.25 * lam * ln_i3 * ln_i3
+
+
+@njit(cache=True, inline="always")
+def _tait(F, dim, b, gamma, P, Finv):
+    """[R eq. 77] (see stress)."""
+    J = det(F, dim)
+    if not J > 0.0:
+        return math.nan
+    p = b * (J ** -gamma - 1.0)
+    inverse(F, dim, Finv)
+    for a in range(dim):
+        for k in range(dim):
+            P[a, k] = -p * J * Finv[k, a]
+    if gamma == 1.0:
+        return b * (J - 1.0 - math.log(J))
+    return b * ((J ** (1.0 - gamma) - 1.0) / (gamma - 1.0) + J - 1.0)
 
 
 @njit(cache=True)

@@ -26,11 +26,14 @@ def update(law, F, dim, c, state, i, P, S, C, Cinv):
 
 
 @njit(cache=True, inline="always")
-def stiffening(law, s_max, J):
+def stiffening(law, s_max, J, c):
     """Tangent stiffening of the law under the total deformation (>= 1): (3 s_max^2 - 1)/2
-    under stretch for Saint Venant-Kirchhoff, 1 - ln J under compression for the
+    under stretch for Saint Venant-Kirchhoff, J^(1 - gamma) under compression for Tait's
+    fluid (its sound speed squared, c[1] = gamma), 1 - ln J under compression for the
     neo-Hookean and Mooney-Rivlin laws (their bulk terms, which set the wave speed); inf
     for an inverted point."""
     if law == elastic.SAINT_VENANT_KIRCHHOFF:
         return max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
+    if law == elastic.TAIT_FLUID:
+        return max(1.0, J ** (1.0 - c[1])) if J > 0 else math.inf
     return max(1.0, 1.0 - math.log(J)) if J > 0 else math.inf
