@@ -148,21 +148,12 @@ def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
     J = det(F, dim)
     if not J > 0.0:
         return math.nan
-    for a in range(dim):
-        for b in range(dim):
-            s = 0.0
-            for k in range(dim):
-                s += F[a, k] * F[b, k]
-            B[a, b] = s
+    right_cauchy_green(F.T, dim, B)  # B = F F^T
+    first_piola(B, B, dim, B2)  # B^2
     i1 = float(3 - dim)
     trace_b2 = float(3 - dim)
     for a in range(dim):
         i1 += B[a, a]
-        for b in range(dim):
-            s = 0.0
-            for k in range(dim):
-                s += B[a, k] * B[k, b]
-            B2[a, b] = s
         trace_b2 += B2[a, a]
     i2 = 0.5 * (i1 * i1 - trace_b2)
     i3 = J * J
