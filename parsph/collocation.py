@@ -64,17 +64,16 @@ class _System:
             return
         sorted_gids = everyone[order]
         in_b = np.isin(gid, sorted_gids)
-        pairs_row, pairs_col, pairs_phi = [], [], []
-        for lo, hi, ptr, idx, phi in segments:
-            sel = rows[(rows >= lo) & (rows < hi)]
-            for i in sel:
-                cols = idx[ptr[i]: ptr[i + 1]]
-                pairs_row.append(np.full(len(cols), i))
-                pairs_col.append(cols)
-                pairs_phi.append(phi[ptr[i]: ptr[i + 1]])
-        row = np.concatenate(pairs_row) if pairs_row else np.zeros(0, np.int64)
-        col = np.concatenate(pairs_col) if pairs_col else np.zeros(0, np.int64)
-        phi = np.concatenate(pairs_phi) if pairs_phi else np.zeros(0)
+        constrained = np.zeros(len(gid), bool)
+        constrained[rows] = True
+        row, col, phi = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0)]
+        for lo, hi, ptr, idx, values in segments:  # each body's pairs of the constrained rows
+            of_pair = np.repeat(np.arange(len(ptr) - 1), np.diff(ptr))
+            take = constrained[of_pair] & (of_pair >= lo) & (of_pair < hi)
+            row.append(of_pair[take])
+            col.append(idx[take])
+            phi.append(values[take])
+        row, col, phi = np.concatenate(row), np.concatenate(col), np.concatenate(phi)
         inside = in_b[col]
         # the known part: pairs with a column outside B, summed per row in pair order
         self.known_row = np.searchsorted(rows, row[~inside])

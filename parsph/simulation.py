@@ -498,13 +498,9 @@ class Simulation:
         n = self.n_owned
         owned = dict(self.particles.migrating(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
-        sets = {}  # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
-        for name, points in self.sets.items():
-            sets[name] = dict(points.migrating(), Xr=points.owned("Xr").copy(), Fr=points.owned("F").copy())
-            for b in self.bodies:
-                lo, hi = b.set_rows[name]
-                if hi > lo:
-                    sets[name]["Xr"][lo:hi] = b.formulation.moved(self, b)
+        # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
+        sets = {name: dict(points.migrating(), Xr=self._moved(name), Fr=points.owned("F").copy())
+                for name, points in self.sets.items()}
         if self.comm.size > 1 and not sets:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
@@ -528,10 +524,7 @@ class Simulation:
         n = self.n_owned
         for name, points in self.sets.items():
             A = points.arrays
-            for b in self.bodies:
-                lo, hi = b.set_rows[name]
-                if hi > lo:
-                    A["Xr"][lo:hi] = b.formulation.moved(self, b)
+            A["Xr"][: points.n_owned] = self._moved(name)
             A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
             points.refresh("Xr", "Fr")
         self.Xr[:n] = self.X[:n] + self.u[:n]
@@ -557,6 +550,16 @@ class Simulation:
         self._omega_hg2 = self._hourglass_frequencies()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
+
+    def _moved(self, name: str) -> np.ndarray:
+        """The owned points of set `name` at their new updated reference, each body's moved
+        with its particles (formulations.galerkin.GalerkinFormulation.moved)."""
+        Xr = self.sets[name].owned("Xr").copy()
+        for b in self.bodies:
+            lo, hi = b.set_rows[name]
+            if hi > lo:
+                Xr[lo:hi] = b.formulation.moved(self, b)
+        return Xr
 
     @contextlib.contextmanager
     def _update_failure(self):

@@ -105,8 +105,14 @@ def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> None:
         out = Path(out_dir) / f"ranks_{n}"
         proc = parsph(["run", scene, "--out", out, "--quiet", *args], ranks=n)
         assert proc.returncode == 0, proc.stderr
-        outs.append(str(out))
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *outs],
+        outs.append(out)
+    assert_identical_outputs(*outs)
+
+
+def assert_identical_outputs(*outs) -> None:
+    """tools/compare_outputs.py finds every history series and the final state of the runs
+    in `outs` identical."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *map(str, outs)],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
 

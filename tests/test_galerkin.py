@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import ROOT, mpiexec
+from conftest import ROOT, assert_identical_outputs, mpiexec
 from parsph.analytic import bar_tip_displacement
 from parsph.errors import InputError
 from parsph.geometry.gauss_points import BoxGaussPoints
@@ -279,9 +279,7 @@ def test_integration_points_across_ranks_and_restarts_bit_for_bit(tmp_path, meth
             assert not np.array_equal(f[f"{points}/Xr"][:], f[f"{points}/X"][:])
     run(split, 3, "--restart", "latest")
     for other in (three, split):
-        proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), str(one), str(other)],
-                              capture_output=True, text=True, timeout=120, cwd=ROOT)
-        assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+        assert_identical_outputs(one, other)
 
 
 # runs/rod.toml at 0.5 mm (120 x 10 particles): [R eq. 75] error at its two snapshots (measured)

@@ -146,10 +146,7 @@ def test_pulse_with_efg_restarted_after_the_release_continues_bit_for_bit(tmp_pa
     parsph.collocation): 200 steps on 1 rank against 150 on 2 ranks (the drive released at
     step 100), checkpointed and continued on 3 ranks: every history series, the external
     work and energies included, and the final state bit for bit."""
-    import subprocess
-    import sys
-
-    from conftest import ROOT, RUNS, parsph
+    from conftest import RUNS, assert_identical_outputs, parsph
 
     common = ["--quiet", "--set", "parameters.dx=1e-3", "--set", 'formulation.type="efg"']
     straight, split = tmp_path / "straight", tmp_path / "split"
@@ -158,6 +155,4 @@ def test_pulse_with_efg_restarted_after_the_release_continues_bit_for_bit(tmp_pa
                               (split, 3, ["--set", "time.max_steps=200", "--restart", "latest"])):
         proc = parsph(["run", RUNS / "rod_pulse.toml", "--out", out, *common, *extra], ranks=ranks)
         assert proc.returncode == 0, proc.stderr
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), str(straight), str(split)],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
-    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+    assert_identical_outputs(straight, split)

@@ -427,10 +427,7 @@ def test_eulerian_kernel_same_answer_on_1_and_3_ranks_searching_every_step_or_no
     60 steps: neighbours searched (particles migrated and re-ghosted) at every step on one
     rank, at most every 30 steps with a skin (the default) on three: history and final state
     bit for bit."""
-    import subprocess
-    import sys
-
-    from conftest import parsph
+    from conftest import assert_identical_outputs, parsph
 
     common = ["--quiet", "--set", f'formulation.type="{ftype}"', "--set", 'formulation.kernel="eulerian"',
               "--set", "time.max_steps=60"]
@@ -438,6 +435,4 @@ def test_eulerian_kernel_same_answer_on_1_and_3_ranks_searching_every_step_or_no
     for out, ranks, extra in zip(outs, (1, 3), (["--set", "formulation.search_every=1"], [])):
         proc = parsph(["run", ROOT / "runs" / "plate_tension.toml", "--out", out, *common, *extra], ranks=ranks)
         assert proc.returncode == 0, proc.stderr
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *map(str, outs)],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
-    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+    assert_identical_outputs(*outs)

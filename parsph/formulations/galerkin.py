@@ -44,11 +44,10 @@ from parsph.fields import Field, register
 from parsph.formulations.base import Stage, source_hash
 from parsph.formulations import tlsph
 from parsph.formulations.reference import PairOptions
-from parsph.formulations.tlsph import gradient_row, times_reference, weighted_stress
+from parsph.formulations.tlsph import gradient_row, stress_at
 from parsph.kernels.correction import MAX_CONDITION
 from parsph.kernels.functions import evaluate
 from parsph.materials import elastic, update
-from parsph.materials.elastic import det
 from parsph.relations import within_support
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
@@ -399,12 +398,7 @@ def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, stat
     first_bad = -1
     for q in range(lo, hi):
         gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-        if updated:
-            times_reference(dim, q, fs, Fr, F)
-        e = update.update(law, F[q], dim, c, state, q, P, S, C, Cinv)
-        J[q] = det(F[q], dim)
-        if not (np.isfinite(e) and J[q] > 0.0) and first_bad < 0:
+        if stress_at(dim, law, updated, q, fs, Fr, weight[q], c, state, P, S, C, Cinv, F, VP, J, psi) \
+                and first_bad < 0:
             first_bad = q
-        psi[q] = e
-        weighted_stress(dim, q, weight[q], P, Fr, updated, VP)
     return first_bad

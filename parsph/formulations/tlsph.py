@@ -142,20 +142,20 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def times_reference(dim, i, fs, Fr, F):
-    """F[i] = fs[i] F^r[i]: the deformation gradient from the motion since the updated
-    reference [V §3.1]."""
-    for a in range(dim):
-        for b in range(dim):
-            s = 0.0
-            for k in range(dim):
-                s += fs[i, a, k] * Fr[i, k, b]
-            F[i, a, b] = s
-
-
-@njit(cache=True, inline="always")
-def weighted_stress(dim, i, w, P, Fr, updated, VP):
-    """VP[i] = w P, or w P F^rT = V^r P^r with an updated reference [V eq. 14]."""
+def stress_at(dim, law, updated, i, fs, Fr, w, c, state, P, S, C, Cinv, F, VP, J, psi):
+    """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
+    updated reference [V §3.1], the material update, J, psi and VP[i] = w P, or w P F^rT =
+    V^r P^r [V eq. 14]. Returns whether the point is inverted or its stress not finite."""
+    if updated:
+        for a in range(dim):
+            for b in range(dim):
+                s = 0.0
+                for k in range(dim):
+                    s += fs[i, a, k] * Fr[i, k, b]
+                F[i, a, b] = s
+    e = update.update(law, F[i], dim, c, state, i, P, S, C, Cinv)
+    J[i] = det(F[i], dim)
+    psi[i] = e
     for a in range(dim):
         for b in range(dim):
             if updated:
@@ -165,6 +165,7 @@ def weighted_stress(dim, i, w, P, Fr, updated, VP):
                 VP[i, a, b] = w * s
             else:
                 VP[i, a, b] = w * P[a, b]
+    return not (math.isfinite(e) and J[i] > 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -196,14 +197,9 @@ def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, g
                         fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
         else:
             gradient_row(dim, i, i, ptr, idx, g, d, fs)
-        if updated:
-            times_reference(dim, i, fs, Fr, F)
-        e = update.update(law, F[i], dim, c, state, i, P, S, C, Cinv)
-        J[i] = det(F[i], dim)
-        if not (math.isfinite(e) and J[i] > 0.0) and first_bad < 0:
+        if stress_at(dim, law, updated, i, fs, Fr, volume[i], c, state, P, S, C, Cinv, F, VP, J, psi) \
+                and first_bad < 0:
             first_bad = i
-        psi[i] = e
-        weighted_stress(dim, i, volume[i], P, Fr, updated, VP)
         if hourglass == HOURGLASS_VARIATIONAL:
             # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
             phi = 0.0

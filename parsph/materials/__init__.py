@@ -56,14 +56,14 @@ def constants(material: dict) -> Constants:
     else:
         if model == "mooney_rivlin":  # psi = lambda (ln J)^2 under dilation: K = 2 lambda
             mu, k = material["c1"] + material["c2"], 2.0 * material["lambda"]
+            values = (material["lambda"], material["c1"], material["c2"])
         elif model == "tait_fluid":  # dp / d(rho / rho0) = gamma B at rest; no shear stiffness
             mu, k = 0.0, material["tait_gamma"] * material["tait_b"]
+            values = (material["tait_b"], material["tait_gamma"], 0.0)
         else:
             mu, k = material["shear_modulus"], material["bulk_modulus"]
+            values = (k - 2.0 * mu / 3.0, mu, k)
         lam = k - 2.0 * mu / 3.0
         youngs = 9.0 * k * mu / (3.0 * k + mu)
-        values = {"mooney_rivlin": lambda: (material["lambda"], material["c1"], material["c2"]),
-                  "tait_fluid": lambda: (material["tait_b"], material["tait_gamma"], 0.0)}.get(
-            model, lambda: (lam, mu, k))()
     return Constants(values=np.array(values), lam=lam, mu=mu, bulk=k, youngs=youngs,
                      wave_speed=math.sqrt((lam + 2 * mu) / rho))
