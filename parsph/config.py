@@ -112,6 +112,12 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "lambda": Key("float", None, positive, "mooney_rivlin: lambda of [R eq. 18] [Pa]"),
         "tait_b": Key("float", None, positive, "tait_fluid: B of p = B ((rho/rho0)^gamma - 1) [R eq. 77] [Pa]"),
         "tait_gamma": Key("float", None, positive, "tait_fluid: gamma of [R eq. 77]"),
+        "yield_stress": Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
+        "hardening_modulus": Key("float", None, None, "j2_plasticity: H = d sigma_Y / d eps_bar, negative "
+                                 "for softening (default 0: perfectly plastic) [Pa]"),
+        "failure_strain": Key("float", None, positive,
+                              "tensile damage [G eq. 45-46]: damage grows while the largest principal log "
+                              "strain exceeds this (default: no damage; solids, particle formulations)"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS),
@@ -150,6 +156,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
                     "fraction of the support (default 0.25)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
+        "plastic_hourglass": Key("bool", True, None,
+                                 "j2_plasticity: a yielded particle's hourglass modulus is its yield stress "
+                                 "instead of E [G §4.5] (false: E throughout)"),
     },
     "time": {
         "end": Key("float", REQUIRED, positive, "end time [s]"),
@@ -378,15 +387,22 @@ def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts") -> list[
 
 
 def _validate_material(path: str, mat: dict) -> None:
-    """The law's constants given, and no constant it does not take."""
+    """The law's constants given, and no constant it does not take; a softening slower than
+    the elastic shear stiffness (3 mu + H > 0, else the return mapping has no unique solution)."""
     law = LAWS[mat["model"]]
     for k in law.takes:
         if mat[k] is None:
             raise InputError(f"missing required key '{path}.{k}' for model '{law.name}'")
+    allowed = law.takes + law.optional
     for k in LAW_KEYS:
-        if k not in law.takes and mat[k] is not None:
-            takes = ", ".join(law.takes[:-1]) + " and " + law.takes[-1]
+        if k not in allowed and mat[k] is not None:
+            takes = ", ".join(allowed[:-1]) + " and " + allowed[-1]
             raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {takes})")
+    if law.name == "j2_plasticity" and mat["hardening_modulus"] is not None:
+        mu = mat["youngs_modulus"] / (2.0 * (1.0 + mat["poisson_ratio"]))
+        if not 3.0 * mu + mat["hardening_modulus"] > 0.0:
+            raise InputError(f"{path}.hardening_modulus = {mat['hardening_modulus']:g} softens faster than the "
+                             f"elastic shear stiffness allows: it must be > -3 mu = {-3.0 * mu:g} Pa")
 
 
 def _validate_groups(raw: Any, dim: int) -> dict:
@@ -740,6 +756,12 @@ def validate(raw: dict) -> dict:
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
     scene["groups"] = _validate_groups(raw.get("groups"), dim)
     _validate_lists(scene, raw, dim)
+    for body in bodies(scene):
+        if body["material"]["failure_strain"] is not None and (
+                body["material"]["model"] == "tait_fluid" or body["formulation"]["type"] in ("kbm", "efg")):
+            raise InputError(f"material.failure_strain: damage is for solids computed at the particles "
+                             f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
+                             f"formulation '{body['formulation']['type']}'")
     if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):
         raise InputError(
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "

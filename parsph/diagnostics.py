@@ -2,9 +2,10 @@
 for bit on any number of ranks.
 
 Disorder: the mass-weighted RMS and the maximum of the hourglass error eta_i
-(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), hourglass
+(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), plastic work (dissipated), the work damage
+withheld (materials.damage), hourglass
 (minus the work done by the hourglass forces), external work (body force, constraint
-reactions and the work that changes the kinetic energy of prescribed motions) and the balance total = kinetic + strain + hourglass - external, which is
+reactions and the work that changes the kinetic energy of prescribed motions) and the balance total = kinetic + strain + plastic + damage + hourglass - external, which is
 constant for an exact integration. Momenta: linear (vector) and angular (scalar in 2D,
 vector in 3D).
 """
@@ -62,21 +63,24 @@ def global_diagnostics(state) -> dict:
     energies = state.energy_sums()
     bodies = state.bodies
     kinetic_parts = [sums(columns[b.lo:b.hi, 2:2 + dim]) for b in bodies] if len(bodies) > 1 else []
-    local = [*sums(columns), *(e for key in ("strain", "hourglass", "external") for e in energies[key]),
+    keys = ("strain", "plastic", "damage", "hourglass", "external")
+    local = [*sums(columns), *(e for key in keys for e in energies[key]),
              *(k for part in kinetic_parts for k in part)]
     parts = allsum(state.comm, local)
     count = len(bodies)
     weighted, mass, kinetic = parts[0], parts[1], parts[2:2 + dim]
     momentum, angular = parts[2 + dim:2 + 2 * dim], parts[2 + 2 * dim:columns.shape[1]]
     rest = parts[columns.shape[1]:]
-    strain, hourglass, external = (rest[k * count:(k + 1) * count] for k in range(3))
-    per_body_kinetic = rest[3 * count:]
+    strain, plastic, damaged, hourglass, external = (rest[k * count:(k + 1) * count] for k in range(len(keys)))
+    per_body_kinetic = rest[len(keys) * count:]
     kinetic = sum(kinetic[1:], kinetic[0])
-    strain_all, hourglass_all, external_all = (sum(e[1:], e[0]) for e in (strain, hourglass, external))
+    strain_all, plastic_all, damage_all, hourglass_all, external_all = (
+        sum(e[1:], e[0]) for e in (strain, plastic, damaged, hourglass, external))
     out = {
-        "kinetic_energy": float(kinetic), "strain_energy": float(strain_all),
-        "hourglass_energy": float(hourglass_all), "external_work": float(external_all),
-        "total_energy": float(kinetic + strain_all + hourglass_all - external_all),
+        "kinetic_energy": float(kinetic), "strain_energy": float(strain_all), "plastic_work": float(plastic_all),
+        "damage_work": float(damage_all), "hourglass_energy": float(hourglass_all),
+        "external_work": float(external_all),
+        "total_energy": float(kinetic + strain_all + plastic_all + damage_all + hourglass_all - external_all),
         "disorder": math.sqrt(float(weighted) / float(mass)),
         "disorder_max": state.comm.allreduce(eta.max() if len(eta) else 0.0, op=MPI.MAX),
     }
@@ -92,9 +96,12 @@ def global_diagnostics(state) -> dict:
             kin = sum(comps[1:], comps[0])
             out[f"kinetic_energy.{b.name}"] = float(kin)
             out[f"strain_energy.{b.name}"] = float(strain[k])
+            out[f"plastic_work.{b.name}"] = float(plastic[k])
+            out[f"damage_work.{b.name}"] = float(damaged[k])
             out[f"hourglass_energy.{b.name}"] = float(hourglass[k])
             out[f"external_work.{b.name}"] = float(external[k])
-            out[f"total_energy.{b.name}"] = float(kin + strain[k] + hourglass[k] - external[k])
+            out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + hourglass[k]
+                                                  - external[k])
     return out
 
 

@@ -2,7 +2,8 @@
 material that needs it, and everything that moves, stores, mirrors or shows point data
 derives from the declarations.
 
-A `Field` says what an array is (its kind: scalar, vector, tensor, point, flags or id),
+A `Field` says what an array is (its kind: scalar, vector, tensor, point, flags, id, or
+state: a material law's `columns` numbers per point, read at the point only),
 whether it travels with its point when ownership changes (`migrate`, which also makes it
 part of the ghost copies sent at set-up), whether checkpoints store it (`checkpoint`), and
 whether snapshots and probes may show it (`units`, None if not). How a field reflects at a
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = ("scalar", "vector", "tensor", "point", "flags", "id")
+KINDS = ("scalar", "vector", "tensor", "point", "flags", "id", "state")
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,7 @@ class Field:
     #                    material law that declares it (carried where a body uses it)
     initial: object = None  # optional: (X, gid) -> initial values (else zeros; u, v: conditions)
     points: str = "particles"  # the point set that carries it
+    columns: int = 0  # of a "state" field
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -49,11 +51,13 @@ class Field:
 
     def shape(self, dim: int) -> tuple:
         """Shape of one point's value ("flags" columns vary; not given here)."""
-        return {"scalar": (), "id": (), "vector": (dim,), "point": (dim,), "tensor": (dim, dim)}[self.kind]
+        return {"scalar": (), "id": (), "vector": (dim,), "point": (dim,), "tensor": (dim, dim),
+                "state": (self.columns,)}[self.kind]
 
     def reflect(self, value: np.ndarray, sign: np.ndarray, offset: np.ndarray) -> np.ndarray:
         """Values of mirror images: points reflect as positions (sign x + offset), vectors
-        and tensors by `sign` per component (tensors on both indices); the rest is copied."""
+        and tensors by `sign` per component (tensors on both indices); the rest is copied (a
+        material state is only read at its own point: an image never evaluates stress)."""
         if self.kind == "point":
             return sign * value + offset
         if self.kind == "vector":

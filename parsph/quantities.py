@@ -37,6 +37,9 @@ _BUILT_IN = (
     Quantity("rank", "rank", "1", probe=False, doc="owner rank"),
     Quantity("reference_position", "point", "m", probe=False),
     Quantity("cauchy_stress", "tensor", "Pa", probe=False),
+    Quantity("plastic_strain", "scalar", "1", doc="equivalent plastic strain (0 for elastic laws)"),
+    Quantity("plastic_work", "scalar", "J/m^3", doc="plastic work per unit reference volume"),
+    Quantity("damage", "scalar", "1", doc="tensile damage D (0 without damage)"),
 )
 BUILT_IN = {q.name: q for q in _BUILT_IN}
 
@@ -72,7 +75,7 @@ def bytes_per_point(name: str, dim: int) -> int:
 # name, by pattern, and NAME.BODY for a body's energies
 HISTORY = {
     "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
-    "strain_energy": "J", "hourglass_energy": "J", "external_work": "J", "total_energy": "J",
+    "strain_energy": "J", "plastic_work": "J", "damage_work": "J", "hourglass_energy": "J", "external_work": "J", "total_energy": "J",
     "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
 HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),

@@ -39,7 +39,7 @@ from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, total
 from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
-from parsph.materials.elastic import first_piola_stresses
+from parsph.materials import damage, elastoplastic, update
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
@@ -62,6 +62,7 @@ class Body:
         self.first, self.last = first, last
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
+        self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
         kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
         self.formulation = kind(spec["formulation"], dim, self.law.law_id)
         self.lo = self.hi = 0
@@ -100,6 +101,8 @@ class Simulation:
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
         if self.updated:
             owners.add("updated")
+        if any(b.failure_strain is not None for b in self.bodies):
+            owners.add("damage")
         self.carried = fields.carried(owners)  # the registered fields the particles carry
         self.rebalance = scene["parallel"]["rebalance"]
         self.group_names = sorted(scene["groups"])
@@ -173,8 +176,8 @@ class Simulation:
         self.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
         self.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
         # fields registered beyond the base and the updated reference: carried as declared
-        extra = {name: self._initial(name, fl, keep) for name in self.carried
-                 if name not in BASE_FIELDS and name not in UPDATED_STATE}
+        extra = self._with_trials({name: self._initial(name, fl, keep) for name in self.carried
+                                   if name not in BASE_FIELDS and name not in UPDATED_STATE}, "particles")
         self.F = np.zeros((keep, dim, dim))
         self.d, self.fs = self.u, self.F  # total-Lagrangian: the reference is X, F^r = I
         if self.updated:
@@ -199,7 +202,7 @@ class Simulation:
         self.youngs = np.array([b.constants.youngs for b in self.bodies])[self.body]
         arrays = dict(X=self.X, measure=self.measure, volume=self.volume, mass=self.mass, support=self.support,
                       groups=fl["groups"][:keep], u=self.u, v=self.v, d=self.d, F=self.F, fs=self.fs, f=self.f,
-                      B=self.B, VP=self.VP, J=self.J, psi=self.psi, **extra)
+                      B=self.B, VP=self.VP, J=self.J, psi=self.psi, youngs=self.youngs, **extra)
         if self.updated:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
@@ -230,7 +233,7 @@ class Simulation:
         rows = local.n_owned + local.n_ghost
         owners = {b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies}
         carried = fields.carried(owners | ({"updated"} if self.updated else set()), name)
-        arrays = {field: self._initial(field, fl, rows, name) for field in carried}
+        arrays = self._with_trials({field: self._initial(field, fl, rows, name) for field in carried}, name)
         arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
                       psi=np.zeros(rows))
         if self.updated:  # the motion from the updated reference
@@ -239,6 +242,40 @@ class Simulation:
         for b in self.bodies:
             b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
         return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, self.comm), carried, arrays)
+
+    @staticmethod
+    def _with_trials(arrays: dict, points: str) -> dict:
+        """`arrays` with a work array NAME_trial beside each material state field NAME: the
+        state the last stress evaluation computed (materials.update), committed at the start
+        of the next step."""
+        states = [name for name in arrays if fields.get(name, points).kind == "state"]
+        return dict(arrays, **{name + "_trial": arrays[name].copy() for name in states})
+
+    def material_state(self, body: Body, points: str = "particles") -> tuple:
+        """(committed, trial) state arrays of `body`'s material law on a point set (empty
+        arrays for a law without state)."""
+        if body.law.state is None:
+            return self.no_state, self.no_state
+        A = self.point_set(points).arrays
+        return A[body.law.state], A[body.law.state + "_trial"]
+
+    def damage_state(self, body: Body) -> tuple:
+        """(committed, trial) damage state arrays of `body`'s particles (empty without damage)."""
+        if body.failure_strain is None:
+            return self.no_state, self.no_state
+        return self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
+
+    def _commit(self, dt: float) -> None:
+        """The state of the last stress evaluation becomes the committed state (owned
+        points); damage grows over the coming step dt (materials.damage.grow)."""
+        for points in self.point_sets():
+            for name in points.carried:
+                if fields.get(name, points.name).kind == "state":
+                    points.owned(name)[:] = points.owned(name + "_trial")
+        for b in self.bodies:
+            if b.failure_strain is not None:
+                damage.grow(self.damage_state(b)[0][b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
+                            self.support[b.lo:b.hi], dt)
 
     def unstable_point(self, points: str, q: int) -> ParsphError:
         """The error for owned point q of set `points`, inverted or with a stress that is
@@ -250,6 +287,9 @@ class Simulation:
             f"{what} {int(A['gid'][q])} at reference ({where}) is inverted or its stress is not finite "
             f"(J = {A['J'][q]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
             f"unstable: {self._advice()}")
+
+    def point_set(self, name: str) -> PointSet:
+        return self.particles if name == "particles" else self.sets[name]
 
     def point_sets(self) -> list:
         """The rank's point sets: the particles, then the others (stress points, Gauss points)."""
@@ -421,6 +461,7 @@ class Simulation:
         t_new = self.t + dt
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
+        self._commit(dt)
         u_old = self.u[:n].copy()
         v_old = self.v[:n].copy() if self.bcs.moving or self.collocation else None
         f_hg_old = self.f_hg.copy()
@@ -430,7 +471,11 @@ class Simulation:
         self.u[:n] += dt * self.v[:n]
         self.t = t_new
         self._prescribe_displacement(self.t)
-        self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
+        force_old = self.force
+        if self.walls.items:  # the obstacles' changes of velocity and displacement
+            v_half, u_drift = self.v[:n].copy(), self.u[:n].copy()
+            self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
+            contact = (v_half, self.v[:n] - v_half, self.u[:n] - u_drift)
         self.compute_forces()
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t)
@@ -442,6 +487,8 @@ class Simulation:
                 self.totals["hourglass_work"][b.index].add(work[b.lo:b.hi])
         self._external = self.external_force()
         work = 0.5 * (f_ext_old + self._external) * du
+        if self.walls.items:
+            work = work + self._contact_work(dt, *contact, force_old)
         for b in self.bodies:
             self.totals["external_work"][b.index].add(work[b.lo:b.hi])
         if v_old is not None:  # and the work that changes the kinetic energy of a prescribed motion
@@ -459,6 +506,17 @@ class Simulation:
             self.update_reference()
             self._stable_dt = self.stable_time_step()[0]
         return dt
+
+    def _contact_work(self, dt: float, v_half: np.ndarray, dv: np.ndarray, du: np.ndarray,
+                      force_old: np.ndarray) -> np.ndarray:
+        """The work of the obstacles in the step (per particle and component) as the
+        kick-drift-kick scheme sees it: the kinetic energy their velocity change dv takes
+        from the mid-step velocity v_half, with the second half kick's share dt/2 f_(n+1) . dv,
+        and the work -(f_n + f_(n+1))/2 . du of the step's forces over the displacement du by
+        which they put particles back on their surfaces (zero where there was no contact).
+        For a particle held at rest on a wall it is zero."""
+        kinetic = 0.5 * self.mass[: self.n_owned, None] * dv * (2.0 * v_half + dv)
+        return kinetic + 0.5 * dt * self.force * dv - 0.5 * (force_old + self.force) * du
 
     def update_reference(self) -> None:
         """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
@@ -617,6 +675,17 @@ class Simulation:
             return self.von_mises(sel)
         if name == "cauchy_stress":
             return self.cauchy_stress(sel)
+        if name == "plastic_strain":
+            return self.plastic(sel, elastoplastic.PLASTIC_STRAIN)
+        if name == "plastic_work":
+            return self.plastic(sel, elastoplastic.PLASTIC_WORK)
+        if name == "damage":
+            out = np.zeros(len(sel))
+            for b in self.bodies:
+                if b.failure_strain is not None:
+                    rows = np.flatnonzero(self.body[sel] == b.index)
+                    out[rows] = self.damage_state(b)[0][sel[rows], damage.DAMAGE]
+            return out
         if name == "disorder":
             return self.disorder()[sel]
         if name == "spacing_ratio":
@@ -649,17 +718,28 @@ class Simulation:
         return out
 
     def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
-        """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law alone."""
+        """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law alone (with
+        the committed state: the stress of the last evaluation)."""
         F = np.ascontiguousarray(self.F[sel])
         P = np.empty_like(F)
         body = self.body[sel]
         for b in self.bodies:
-            rows = slice(None) if len(self.bodies) == 1 else np.flatnonzero(body == b.index)
+            rows = np.arange(len(sel)) if len(self.bodies) == 1 else np.flatnonzero(body == b.index)
+            state = np.ascontiguousarray(self.material_state(b)[0][sel[rows]]) if b.law.state else self.no_state
             part = np.empty_like(F[rows])
-            c = b.constants
-            first_piola_stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, *c.values, part)
+            update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, b.constants.values, state,
+                            state.copy(), part, np.empty(len(rows)))
             P[rows] = part
         return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
+
+    def plastic(self, sel: np.ndarray, column: int) -> np.ndarray:
+        """A column of the elasto-plastic state at the owned particles `sel` (0 for other laws)."""
+        out = np.zeros(len(sel))
+        for b in self.bodies:
+            if b.law.state == "plastic_state":
+                rows = np.flatnonzero(self.body[sel] == b.index)
+                out[rows] = self.material_state(b)[1][sel[rows], column]
+        return out
 
     def von_mises(self, sel: np.ndarray) -> np.ndarray:
         s = self.cauchy_stress(sel)
@@ -671,13 +751,21 @@ class Simulation:
 
     def energy_sums(self) -> dict:
         """This rank's parts of the energies of each body, exact: strain (sum V^0 psi of the
-        owned particles), hourglass (their penalty, or the work absorbed on this rank by the
-        paper form, plus the penalty released at reference updates) and external work."""
-        out = {"strain": [], "hourglass": [], "external": []}
+        owned integration points), plastic work (sum V^0 w_p), the work damage withheld
+        (sum V^0 w_D, materials.damage), hourglass (the particles' penalty, or the work
+        absorbed on this rank by the paper form, plus the penalty
+        released at reference updates) and external work."""
+        out = {"strain": [], "plastic": [], "damage": [], "hourglass": [], "external": []}
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            out["strain"].append(total(b.formulation.strain_energy_terms(self, b)))
+            out["strain"].append(total(b.formulation.integrated(self, b, lambda A: A["psi"])))
+            plastic = total(np.zeros(0)) if b.law.state != "plastic_state" else total(b.formulation.integrated(
+                self, b, lambda A: A["plastic_state_trial"][:, elastoplastic.PLASTIC_WORK]))
+            out["plastic"].append(plastic)
+            withheld = np.zeros(0) if b.failure_strain is None else \
+                self.volume[lo:hi] * self.damage_state(b)[1][lo:hi, damage.WORK]
+            out["damage"].append(total(withheld))
             out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
             out["external"].append(acc["external_work"])
         return out

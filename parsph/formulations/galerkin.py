@@ -47,7 +47,7 @@ from parsph.formulations.reference import PairOptions
 from parsph.formulations.tlsph import gradient_row, stress_at
 from parsph.kernels.correction import MAX_CONDITION
 from parsph.kernels.functions import evaluate
-from parsph.materials import elastic, update
+from parsph.materials import damage, elastic, elastoplastic, update
 from parsph.relations import within_support
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
@@ -294,22 +294,23 @@ class GalerkinFormulation:
                 arrays = A if self.updated else dict(A, fs=A["F"], Fr=A["F"])  # total-Lagrangian: F^r = I
                 lo, hi = body.set_rows[coupling.points]
                 fail = (lambda q, name=coupling.points: sim.unstable_point(name, q))
-            runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points)))
+            runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points),
+                         coupling.points))
 
         def displacement():  # from the updated reference, d = u - (X^r - X)
             np.subtract(sim.u[body.lo:body.hi], sim.shift[body.lo:body.hi], out=sim.d[body.lo:body.hi])
 
         def kinematics_stress():
-            for coupling, arrays, lo, hi, fail, weight in runs:
+            for coupling, arrays, lo, hi, fail, weight, points in runs:
                 bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.d,
-                                             weight, c, sim.no_state, arrays["fs"], arrays["F"], arrays["Fr"],
-                                             arrays["VP"], arrays["J"], arrays["psi"])
+                                             weight, c, *sim.material_state(body, points), arrays["fs"],
+                                             arrays["F"], arrays["Fr"], arrays["VP"], arrays["J"], arrays["psi"])
                 if bad >= 0:
                     raise fail(bad)
 
         def forces():
             sim.f_int[body.lo:body.hi] = 0.0
-            for coupling, arrays, _, _, _, _ in runs:
+            for coupling, arrays, *_ in runs:
                 if coupling.integrates:
                     self.forces(body.lo, body.hi, coupling.test_ptr, coupling.test_idx, coupling.test_g,
                                 arrays["VP"], sim.f_int)
@@ -337,23 +338,25 @@ class GalerkinFormulation:
                     out.append((A["X"][lo:hi], A["F"][lo:hi], weight[lo:hi]))
         return out
 
-    def strain_energy_terms(self, sim, body) -> np.ndarray:
-        """w_q psi_q over the body's owned integration points."""
+    def integrated(self, sim, body, density) -> np.ndarray:
+        """w_q q_q over the body's owned integration points, q = density(arrays) per row of
+        a point set's arrays (a density per unit reference volume: psi, plastic work)."""
         terms = []
         for coupling in self.couplings:
             if not coupling.integrates:
                 continue
             weight = self.weights(sim, coupling.points)
             if coupling.points == "particles":
-                terms.append(weight[body.lo:body.hi] * sim.psi[body.lo:body.hi])
+                lo, hi = body.lo, body.hi
             else:
                 lo, hi = body.set_rows[coupling.points]
-                terms.append(weight[lo:hi] * sim.sets[coupling.points].arrays["psi"][lo:hi])
+            terms.append(weight[lo:hi] * density(sim.point_set(coupling.points).arrays)[lo:hi])
         return np.concatenate(terms)
 
 
 # ------------------------------------------------------------------ compiled stages
-_SOURCE_HASH = source_hash(__file__, tlsph.__file__, elastic.__file__, update.__file__)
+_SOURCE_HASH = source_hash(__file__, tlsph.__file__, elastic.__file__, elastoplastic.__file__, damage.__file__,
+                           update.__file__)
 
 
 def compile_stages(dim: int, law: int, updated: bool = False):
@@ -362,12 +365,12 @@ def compile_stages(dim: int, law: int, updated: bool = False):
     source = _SOURCE_HASH
 
     @njit(cache=True)
-    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, fs, F, Fr, VP, J, psi):
+    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi):
         """F, stress, w P, J and psi at integration points lo..hi-1; returns the first
         inverted point or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, fs, F, Fr, VP, J,
-                           psi)
+        return _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP,
+                           J, psi)
 
     @njit(cache=True)
     def forces(lo, hi, ptr, idx, g, VP, f_int):
@@ -387,18 +390,19 @@ def compile_stages(dim: int, law: int, updated: bool = False):
 
 
 @njit(cache=True, inline="always")
-def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, fs, F, Fr, VP, J, psi):
+def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J,
+                psi):
     """F = I + sum_J (d_J - d_base) (x) G_J at each point; updated reference (Eulerian
     kernel): that is the motion from the reference fs, F = fs F^r, and the forces take
     V^0 P F^rT = V^r P^r [V eq. 14]. In the total-Lagrangian case fs and F are one array."""
     P = np.empty((dim, dim))
-    S = np.empty((dim, dim))
-    C = np.empty((dim, dim))
-    Cinv = np.empty((dim, dim))
+    work = np.empty((update.WORK, 3, 3))
     first_bad = -1
     for q in range(lo, hi):
         gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-        if stress_at(dim, law, updated, q, fs, Fr, weight[q], c, state, P, S, C, Cinv, F, VP, J, psi) \
+        undamaged = state[:, :0]  # damage is computed at particles only (config)
+        if stress_at(dim, law, updated, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P, work, F, VP, J,
+                     psi) \
                 and first_bad < 0:
             first_bad = q
     return first_bad

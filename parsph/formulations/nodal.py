@@ -2,7 +2,8 @@
 
   tlsph  corrected SPH, total-Lagrangian [G §2]: F_i = I + sum_j (u_j - u_i) (x) g_ij with
          the corrected gradient g_ij = V_j L_i^-1 w_ij, pair-form [G eq. 24] or
-         virtual-work [V eq. 11] forces, hourglass control [G eq. 25-32]
+         virtual-work [V eq. 11] forces, hourglass control [G eq. 25-32] (a yielded
+         elasto-plastic particle's modulus in it is its yield stress [G §4.5])
   ulsph  the same from an updated reference X^r [V §3.1], optionally stabilised by
          Hessian's difference [V eq. 17, 21]
   sph    symmetrised SPH [R eq. 21-25, 57, Table 1]: the plain kernel gradient
@@ -28,6 +29,7 @@ from parsph.fields import Field, register
 from parsph.formulations import tlsph
 from parsph.formulations.base import Stage
 from parsph.formulations.reference import PairOptions
+from parsph.materials import damage, elastoplastic
 
 TYPES = ("tlsph", "ulsph", "sph", "rlm")
 
@@ -51,6 +53,7 @@ class NodalFormulation:
         self.updated = self.type == "ulsph" or self.eulerian
         self.alpha = options["hourglass"]
         self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
+        self.plastic_hourglass = options["plastic_hourglass"]
         self.eta = options["hessian"]
         self.weighted_hessian = options["hessian_correction"] == "weighted"
         self.update_every, self.update_strain = (1, 0.0) if self.eulerian else \
@@ -68,9 +71,10 @@ class NodalFormulation:
         lo, hi = body.lo, body.hi
         return [(sim.X[lo:hi], sim.F[lo:hi], sim.volume[lo:hi])]
 
-    def strain_energy_terms(self, sim, body) -> np.ndarray:
-        """V^0 psi over the body's owned particles."""
-        return sim.volume[body.lo:body.hi] * sim.psi[body.lo:body.hi]
+    def integrated(self, sim, body, density) -> np.ndarray:
+        """V^0 q over the body's owned particles, q = density(arrays) per row of the
+        particles' arrays (a density per unit reference volume: psi, plastic work)."""
+        return sim.volume[body.lo:body.hi] * density(sim.particles.arrays)[body.lo:body.hi]
 
     def stages(self, sim, body) -> list:
         """The passes of one force evaluation over `body`'s owned particles of `sim`."""
@@ -81,6 +85,18 @@ class NodalFormulation:
                 lo, hi = body.lo, body.hi
                 np.subtract(sim.u[lo:hi], sim.shift[lo:hi], out=sim.d[lo:hi])
             out.append(Stage("kinematics+stress", displacement, writes=("d",)))
+        plastic = self.plastic_hourglass and body.law.state == "plastic_state"
+        if hourglass and (plastic or body.failure_strain is not None):
+            def hourglass_modulus():  # from the committed state: [G §4.5], and (1 - D) E
+                lo, hi = body.lo, body.hi
+                modulus = np.full(hi - lo, body.constants.youngs)
+                if plastic:
+                    modulus = elastoplastic.hourglass_modulus(body.constants.values,
+                                                              sim.material_state(body)[0][lo:hi], modulus)
+                if body.failure_strain is not None:
+                    modulus *= damage.hourglass_factor(sim.damage_state(body)[0][lo:hi])
+                sim.youngs[lo:hi] = modulus
+            out.append(Stage("kinematics+stress", hourglass_modulus, writes=("youngs",)))
         if hessian:
             def gradient():
                 ref = sim.ref
@@ -91,8 +107,8 @@ class NodalFormulation:
             ref = sim.ref
             bad = self.kinematics_stress(
                 body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
-                sim.youngs, body.constants.values, sim.no_state, sim.f, sim.fs, sim.F,
-                sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi)
+                sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
+                sim.fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi)
             if bad >= 0:
                 raise sim.unstable_particle(bad)
         out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
@@ -108,7 +124,7 @@ class NodalFormulation:
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, sim.fs, sim.VP, sim.B, sim.youngs,
                         sim.volume, sim.f_int, sim.f_hg)
-        reads = ("VP",) + (("fs",) if hourglass else ()) + (("B",) if hessian else ())
+        reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg")))
         return out

@@ -54,11 +54,11 @@ import numpy as np
 from numba import njit
 
 from parsph.formulations.base import source_hash
-from parsph.materials import elastic, update
+from parsph.materials import damage, elastic, elastoplastic, update
 from parsph.materials.elastic import det, right_cauchy_green
 
 
-_SOURCE_HASH = source_hash(__file__, elastic.__file__, update.__file__)
+_SOURCE_HASH = source_hash(__file__, elastic.__file__, elastoplastic.__file__, damage.__file__, update.__file__)
 
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
@@ -92,14 +92,15 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         _gradient(dim, lo, hi, ptr, idx, g, d, f)
 
     @njit(cache=True)
-    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, f, fs, F,
-                          Fr, VP, J, psi, hg_psi):
-        """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi
-        and (variational form) hourglass penalty hg_psi; returns the first inverted
-        particle or -1."""
+    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damaged,
+                          damaged_trial, f, fs, F, Fr, VP, J, psi, hg_psi):
+        """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
+        new material and damage state (trial, damaged_trial) and (variational form)
+        hourglass penalty hg_psi; returns the first inverted particle or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
         return _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, gh, dx, hgc, d,
-                           volume, youngs, c, state, f, fs, F, Fr, VP, J, psi, hg_psi)
+                           volume, youngs, c, state, trial, damaged, damaged_trial, f, fs, F, Fr, VP, J, psi,
+                           hg_psi)
 
     @njit(cache=True)
     def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
@@ -142,9 +143,10 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def stress_at(dim, law, updated, i, fs, Fr, w, c, state, P, S, C, Cinv, F, VP, J, psi):
+def stress_at(dim, law, updated, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F, VP, J, psi):
     """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
-    updated reference [V §3.1], the material update, J, psi and VP[i] = w P, or w P F^rT =
+    updated reference [V §3.1], the material update (new state in trial[i]), its damage
+    (materials.damage, if `damaged` has columns), J, psi and VP[i] = w P, or w P F^rT =
     V^r P^r [V eq. 14]. Returns whether the point is inverted or its stress not finite."""
     if updated:
         for a in range(dim):
@@ -153,7 +155,9 @@ def stress_at(dim, law, updated, i, fs, Fr, w, c, state, P, S, C, Cinv, F, VP, J
                 for k in range(dim):
                     s += fs[i, a, k] * Fr[i, k, b]
                 F[i, a, b] = s
-    e = update.update(law, F[i], dim, c, state, i, P, S, C, Cinv)
+    e = update.update(law, F[i], dim, c, state, trial, i, P, work)
+    if damaged.shape[1] > 0:
+        damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
     J[i] = det(F[i], dim)
     psi[i] = e
     for a in range(dim):
@@ -176,11 +180,9 @@ def _gradient(dim, lo, hi, ptr, idx, g, d, f):
 
 @njit(cache=True, inline="always")
 def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume,
-                youngs, c, state, f, fs, F, Fr, VP, J, psi, hg_psi):
+                youngs, c, state, trial, damaged, damaged_trial, f, fs, F, Fr, VP, J, psi, hg_psi):
     P = np.empty((dim, dim))
-    S = np.empty((dim, dim))
-    C = np.empty((dim, dim))
-    Cinv = np.empty((dim, dim))
+    work = np.empty((update.WORK, 3, 3))
     err = np.empty(dim)
     first_bad = -1
     for i in range(lo, hi):
@@ -197,7 +199,8 @@ def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, g
                         fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
         else:
             gradient_row(dim, i, i, ptr, idx, g, d, fs)
-        if stress_at(dim, law, updated, i, fs, Fr, volume[i], c, state, P, S, C, Cinv, F, VP, J, psi) \
+        if stress_at(dim, law, updated, i, fs, Fr, volume[i], c, state, trial, damaged, damaged_trial, P, work, F,
+                     VP, J, psi) \
                 and first_bad < 0:
             first_bad = i
         if hourglass == HOURGLASS_VARIATIONAL:

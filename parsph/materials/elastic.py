@@ -185,13 +185,3 @@ def _tait(F, dim, b, gamma, P, Finv):
     if gamma == 1.0:
         return b * (J - 1.0 - math.log(J))
     return b * ((J ** (1.0 - gamma) - 1.0) / (gamma - 1.0) + J - 1.0)
-
-
-@njit(cache=True)
-def first_piola_stresses(model, F, dim, lam, mu, bulk, P):
-    """P[n] = P(F[n]) for a stack of deformation gradients (output and tests)."""
-    S = np.empty((dim, dim))
-    C = np.empty((dim, dim))
-    Cinv = np.empty((dim, dim))
-    for n in range(F.shape[0]):
-        stress(model, F[n], dim, lam, mu, bulk, P[n], S, C, Cinv)

@@ -1,28 +1,38 @@
 """The compiled material update the formulations call at every integration point:
 
-    psi = update(law, F, dim, c, state, i, P, S, C, Cinv)
+    psi = update(law, F, dim, c, state, trial, i, P, work)
 
 writes the first Piola-Kirchhoff stress P for the deformation gradient F and returns the
-strain-energy density per unit reference volume (NaN for an inverted point); `c` are the
-law's constants (materials.Constants.values), `state` the (points, k) array of its per-point
-state, row i. `stiffening` is the factor on the reference P-wave speed squared that the
-stable time step uses. `law` is a compile-time constant of the calling stage, so the branch
-below is folded away: each stage holds only its law's code. A new law family adds one
-branch here and its entry in materials.LAWS.
+(elastic) strain-energy density per unit reference volume (NaN for an inverted point); `c`
+are the law's constants (materials.Constants.values). A law with per-point state reads
+point i's committed state, row i of `state` (points, k), and writes its new state to row i
+of `trial`; the loop commits trial to state at the start of the next step, so evaluating
+the stress again at the same F (a restart, a reference update) gives the same result.
+`work` is scratch space, (WORK, 3, 3), allocated once per stage. `stiffening` is the
+factor on the reference P-wave speed squared that the stable time step uses. `law` is a
+compile-time constant of the calling stage, so the branch below is folded away: each
+stage holds only its law's code. A new law family adds one branch here and its entry in
+materials.LAWS.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-from parsph.materials import elastic
+from parsph.materials import elastic, elastoplastic
+
+J2_PLASTICITY = 5
+WORK = elastoplastic.WORK  # the most scratch matrices a law uses
 
 
 @njit(cache=True, inline="always")
-def update(law, F, dim, c, state, i, P, S, C, Cinv):
-    return elastic.stress(law, F, dim, c[0], c[1], c[2], P, S, C, Cinv)
+def update(law, F, dim, c, state, trial, i, P, work):
+    if law == J2_PLASTICITY:
+        return elastoplastic.j2(F, dim, c, state, trial, i, P, work)
+    return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
 
 
 @njit(cache=True, inline="always")
@@ -30,10 +40,21 @@ def stiffening(law, s_max, J, c):
     """Tangent stiffening of the law under the total deformation (>= 1): (3 s_max^2 - 1)/2
     under stretch for Saint Venant-Kirchhoff, J^(1 - gamma) under compression for Tait's
     fluid (its sound speed squared, c[1] = gamma), 1 - ln J under compression for the
-    neo-Hookean and Mooney-Rivlin laws (their bulk terms, which set the wave speed); inf
+    neo-Hookean, Mooney-Rivlin and Hencky elasto-plastic laws (their bulk terms, which set
+    the wave speed; plastic flow only softens the elasto-plastic one); inf
     for an inverted point."""
     if law == elastic.SAINT_VENANT_KIRCHHOFF:
         return max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
     if law == elastic.TAIT_FLUID:
         return max(1.0, J ** (1.0 - c[1])) if J > 0 else math.inf
     return max(1.0, 1.0 - math.log(J)) if J > 0 else math.inf
+
+
+@njit(cache=True)
+def stresses(law, F, dim, c, state, trial, P, psi):
+    """P[n], psi[n] and trial[n] for a stack of deformation gradients F[n] from the
+    committed states state[n] (output, material tests; state and trial have no columns
+    for a law without state)."""
+    work = np.empty((WORK, 3, 3))
+    for n in range(F.shape[0]):
+        psi[n] = update(law, F[n], dim, c, state, trial, n, P[n], work)

@@ -1,0 +1,99 @@
+"""Tensile damage [G §4.6, eq. 45-46] on top of any solid law (`material.failure_strain`).
+
+While the largest principal logarithmic strain of a point exceeds the failure strain, its
+damage grows at  d(D^(1/3))/dt = 0.4 c0 / h  (c0 the reference P-wave speed, h the kernel
+support radius of the particle; [G] leaves the strain measure and the sound speed open),
+irreversibly, capped at 1. The Cauchy stress of the law is scaled in its principal axes:
+positive principal stresses by (1 - D), negative ones are kept, so a failed point (D = 1)
+carries compression but no tension. Its pairs stay; its hourglass modulus is (1 - D) E
+(formulations.nodal), so the penalty does not hold a crack shut.
+
+The degraded stress derives from no energy, so the loop keeps the work it withholds,
+  w_D = int (P_damaged - P_law) : dF  (<= 0 while a damaged point is stretched),
+per unit reference volume by the trapezoidal rule; strain energy (of the law) + w_D is the
+energy the point has taken, and the balance of the run stays checkable.
+
+The state row (committed; the stress evaluation writes the trial row): D, the largest
+principal strain at the last evaluation, w_D, P_law - P_damaged and F of the last
+evaluation (3 x 3 each, row-major, the model's dim x dim block used).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from parsph.materials.elastic import det, inverse, right_cauchy_green
+from parsph.materials.elastoplastic import symmetric_eigen
+
+COLUMNS = 21
+DAMAGE, STRAIN, WORK, DELTA, PREVIOUS = 0, 1, 2, 3, 12
+RATE = 0.4  # damage front speed over the sound speed [G eq. 45]
+
+
+def initial_state(n: int) -> np.ndarray:
+    out = np.zeros((n, COLUMNS))
+    out[:, PREVIOUS + 0] = out[:, PREVIOUS + 4] = out[:, PREVIOUS + 8] = 1.0  # F = I
+    return out
+
+
+@njit(cache=True)  # not inlined: stages without damage do not compile it
+def degrade(P, F, dim, state, trial, i, work):
+    """Scale the positive principal Cauchy stresses of P (at F, point i) by 1 - D from the
+    committed state[i]; write trial[i] (the strain, w_D, P_law - P, F). `work`: 3x3 scratch
+    matrices (at least 5)."""
+    D = state[i, DAMAGE]
+    C, N, sigma, Finv = work[0], work[1], work[2], work[3]
+    values = work[4][0]
+    for a in range(3):
+        for b in range(3):
+            C[a, b] = 1.0 if a == b else 0.0
+            sigma[a, b] = 0.0
+    right_cauchy_green(F, dim, C)
+    symmetric_eigen(C, values, N)
+    largest = max(values[0], values[1], values[2])
+    trial[i, STRAIN] = 0.5 * math.log(largest) if largest > 0.0 else 0.0
+    J = det(F, dim)
+    inverse(F, dim, Finv)
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += P[a, k] * F[b, k]
+            sigma[a, b] = s / J
+    symmetric_eigen(sigma, values, N)
+    for k in range(3):
+        values[k] *= (1.0 - D) if values[k] > 0.0 else 1.0
+    work_rate = 0.0
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(3):
+                for m in range(dim):
+                    s += N[a, k] * values[k] * N[m, k] * Finv[b, m]
+            damaged = J * s
+            delta = P[a, b] - damaged
+            column = 3 * a + b
+            work_rate += (delta + state[i, DELTA + column]) * (F[a, b] - state[i, PREVIOUS + column])
+            trial[i, DELTA + column] = delta
+            trial[i, PREVIOUS + column] = F[a, b]
+            P[a, b] = damaged
+    trial[i, DAMAGE] = D
+    trial[i, WORK] = state[i, WORK] - 0.5 * work_rate
+
+
+def grow(state: np.ndarray, failure_strain: float, speed: float, support: np.ndarray, dt: float) -> None:
+    """Damage growth over a step dt from the committed state (in place, rows of `state`,
+    each point's support radius in `support`): D^(1/3) += 0.4 c0 dt / h where the strain
+    of the last evaluation exceeds the failure strain, capped at 1."""
+    loaded = state[:, STRAIN] > failure_strain
+    if loaded.any():
+        root = np.cbrt(state[loaded, DAMAGE]) + RATE * speed * dt / support[loaded]
+        state[loaded, DAMAGE] = np.minimum(root, 1.0) ** 3
+
+
+def hourglass_factor(state: np.ndarray) -> np.ndarray:
+    """1 - D: the share of E a damaged point keeps in its hourglass force."""
+    return 1.0 - state[:, DAMAGE]

@@ -1,0 +1,180 @@
+"""Finite-strain J2 elasto-plasticity with a multiplicative split F = F^e F^p (Simo; Bonet &
+Wood, Nonlinear Continuum Mechanics, ch. 7), as [G §4.5] uses it for the Taylor bar.
+
+Hencky's elastic law in the principal logarithmic elastic stretches eps_a of the elastic
+left Cauchy-Green tensor b^e = F (C^p)^-1 F^T:
+    tau_a = 2 mu dev(eps)_a + K theta,   psi^e = mu |dev eps|^2 + K/2 theta^2,  theta = ln J,
+von Mises yield f = sqrt(3/2) |dev tau| - sigma_Y(eps_bar) with linear isotropic hardening
+or softening sigma_Y = max(sigma_Y0 + H eps_bar, 0), and the radial return from the
+trial state (C^p)^-1_n:  dev eps = (1 - sqrt(6) mu d_eps / |dev tau^trial|) dev eps^trial,
+d_eps = f^trial / (3 mu + H) (once sigma_Y reaches zero: the whole excess), then
+(C^p)^-1_(n+1) = F^-1 b^e F^-T. The first Piola-Kirchhoff stress is P = tau F^-T.
+
+The state of a point, in the columns of its row: (C^p)^-1 (xx, yy, zz, xy, yz, xz), the
+equivalent plastic strain eps_bar and the plastic work per unit reference volume
+w_p = int sigma_Y d eps_bar (the dissipation of J2 flow, tau : d^p = sigma_Y d eps_bar / dt),
+exact for the increment d_eps: strain energy + plastic work then match the stress work to
+the accuracy of the time integration. Missing dimensions (plane strain in 2D, 1D) are held
+at unit stretch; the state is always 3D (plane strain still flows out of plane).
+
+For [R §9.5] (printed as a Jaumann rate of Kirchhoff stress, eq. 76) the same law is used:
+it is objective exactly, needs no rate integration and keeps the energy balance, and for
+small elastic strains it is the hyperelastic counterpart of the printed hypoelastic one.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from parsph.materials.elastic import det, inverse
+
+COLUMNS = 8  # (C^p)^-1 in 6 columns, eps_bar, w_p
+WORK = 7  # scratch 3x3 matrices of the update
+PLASTIC_STRAIN, PLASTIC_WORK = 6, 7
+_SQRT_3_2 = math.sqrt(1.5)
+_SQRT_6 = math.sqrt(6.0)
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
+
+
+def initial_state(n: int) -> np.ndarray:
+    """The virgin state: (C^p)^-1 = I, no plastic strain or work."""
+    out = np.zeros((n, COLUMNS))
+    out[:, :3] = 1.0
+    return out
+
+
+@njit(cache=True)
+def symmetric_eigen(A, w, V):
+    """Eigenvalues w and unit eigenvectors (the columns of V) of the symmetric 3x3 matrix A
+    (overwritten), by cyclic Jacobi rotations (deterministic, to rounding)."""
+    for a in range(3):
+        for b in range(3):
+            V[a, b] = 1.0 if a == b else 0.0
+    for _ in range(50):
+        off = A[0, 1] * A[0, 1] + A[0, 2] * A[0, 2] + A[1, 2] * A[1, 2]
+        scale = A[0, 0] * A[0, 0] + A[1, 1] * A[1, 1] + A[2, 2] * A[2, 2]
+        if off <= 1e-36 * scale:
+            break
+        for p, q, r in ((0, 1, 2), (0, 2, 1), (1, 2, 0)):
+            apq = A[p, q]
+            if apq == 0.0:
+                continue
+            theta = (A[q, q] - A[p, p]) / (2.0 * apq)
+            if abs(theta) > 1e150:
+                t = 0.5 / theta
+            else:
+                t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            A[p, p] -= t * apq
+            A[q, q] += t * apq
+            A[p, q] = A[q, p] = 0.0
+            arp, arq = A[r, p], A[r, q]
+            A[r, p] = A[p, r] = c * arp - s * arq
+            A[r, q] = A[q, r] = s * arp + c * arq
+            for k in range(3):
+                vkp, vkq = V[k, p], V[k, q]
+                V[k, p] = c * vkp - s * vkq
+                V[k, q] = s * vkp + c * vkq
+    for a in range(3):
+        w[a] = A[a, a]
+
+
+@njit(cache=True, inline="always")
+def _yield_integral(yield0, hardening, start, step):
+    """int sigma_Y d eps_bar from start to start + step, sigma_Y = max(yield0 + H eps_bar, 0)."""
+    if step == 0.0:
+        return 0.0
+    end = start + step
+    if hardening < 0.0:  # no dissipation once the yield stress is exhausted
+        end = min(end, -yield0 / hardening)
+        if end <= start:
+            return 0.0
+    return (end - start) * (yield0 + 0.5 * hardening * (start + end))
+
+
+@njit(cache=True, inline="always")
+def _sandwich(A, B, out):
+    """out = A B A^T (3x3)."""
+    for a in range(3):
+        for b in range(3):
+            s = 0.0
+            for k in range(3):
+                for m in range(3):
+                    s += A[a, k] * B[k, m] * A[b, m]
+            out[a, b] = s
+
+
+@njit(cache=True)  # not inlined: the stages of the other laws do not compile it
+def j2(F, dim, c, state, trial, i, P, work):
+    """The return mapping at point i (see the module): reads the committed state[i], writes
+    trial[i] and P; returns psi^e (NaN if J <= 0). `work`: (WORK, 3, 3) scratch."""
+    mu, bulk, yield0, hardening = c[1], c[2], c[3], c[4]
+    F3, Finv, cp, be, N, tau, vectors = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
+    w, eps, dev = vectors[0], vectors[1], vectors[2]
+    for a in range(3):
+        for b in range(3):
+            F3[a, b] = F[a, b] if a < dim and b < dim else (1.0 if a == b else 0.0)
+    J = det(F3, 3)
+    if not J > 0.0:
+        return math.nan
+    inverse(F3, 3, Finv)
+    for k in range(6):
+        a, b = _PAIRS[k]
+        cp[a, b] = cp[b, a] = state[i, k]
+    _sandwich(F3, cp, be)  # b^e trial = F (C^p)^-1 F^T
+    symmetric_eigen(be, w, N)
+    for a in range(3):
+        if not w[a] > 0.0:
+            return math.nan
+        eps[a] = 0.5 * math.log(w[a])
+    theta = eps[0] + eps[1] + eps[2]
+    for a in range(3):
+        dev[a] = eps[a] - theta / 3.0
+    norm = 2.0 * mu * math.sqrt(dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2])
+    eps_bar = state[i, PLASTIC_STRAIN]
+    excess = _SQRT_3_2 * norm - max(yield0 + hardening * eps_bar, 0.0)
+    step = 0.0
+    if excess > 0.0:
+        step = excess / (3.0 * mu + hardening)
+        if yield0 + hardening * (eps_bar + step) < 0.0:  # the yield stress is exhausted
+            step = _SQRT_3_2 * norm / (3.0 * mu)
+        scale = 1.0 - _SQRT_6 * mu * step / norm
+        for a in range(3):
+            dev[a] *= scale
+    psi = mu * (dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2]) + 0.5 * bulk * theta * theta
+    for a in range(3):
+        for b in range(3):
+            tau[a, b] = 0.0
+            be[a, b] = 0.0
+    for k in range(3):
+        tau_k = 2.0 * mu * dev[k] + bulk * theta
+        stretch2 = math.exp(2.0 * (dev[k] + theta / 3.0))
+        for a in range(3):
+            for b in range(3):
+                nn = N[a, k] * N[b, k]
+                tau[a, b] += tau_k * nn
+                be[a, b] += stretch2 * nn
+    _sandwich(Finv, be, cp)  # (C^p)^-1 = F^-1 b^e F^-T
+    for k in range(6):
+        a, b = _PAIRS[k]
+        trial[i, k] = 0.5 * (cp[a, b] + cp[b, a])
+    trial[i, PLASTIC_STRAIN] = eps_bar + step
+    trial[i, PLASTIC_WORK] = state[i, PLASTIC_WORK] + _yield_integral(yield0, hardening, eps_bar, step)
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += tau[a, k] * Finv[b, k]
+            P[a, b] = s
+    return psi
+
+
+def hourglass_modulus(c: np.ndarray, state: np.ndarray, youngs: float) -> np.ndarray:
+    """[G §4.5]: a point that has yielded uses its yield stress in place of E in the
+    hourglass force, one that has not keeps E (from the committed state of each row)."""
+    eps_bar = state[:, PLASTIC_STRAIN]
+    return np.where(eps_bar > 0.0, np.maximum(c[3] + c[4] * eps_bar, 0.0), youngs)

@@ -1,0 +1,103 @@
+#!/usr/bin/env python3
+"""The Taylor bar of [G §4.5] (runs/taylor_impact.toml) at three lattice spacings (0.35,
+0.175, 0.1167 mm), and at the base spacing without hourglass control and with E in the
+hourglass force ([G Fig. 9]'s contrasts). Prints a table: particles, final length (the
+shortest top position, when the bar has stopped) over the initial one, foot width (at the
+end, twice the largest |x|), largest plastic strain, energy balance error
+(max |total - initial| / initial), disorder (mass-weighted RMS of the hourglass error at the
+end) and wall time; draws the final plastic strain of every case side by side into
+OUT/taylor_impact.png.
+
+usage: tools/taylor_study.py [--ranks N] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+CASES = (  # label, overrides
+    ("0.35 mm", []),
+    ("0.175 mm", ["parameters.spacing=1.75e-4"]),
+    ("0.117 mm", ["parameters.spacing=1.1666666666666667e-4"]),
+    ("0.35 mm, alpha = 0", ["formulation.hourglass=0"]),
+    ("0.35 mm, E in hourglass", ["formulation.plastic_hourglass=false"]),
+)
+
+
+def launcher(ranks: int) -> list:
+    if ranks == 1:
+        return []
+    mpiexec = subprocess.run(["bash", os.path.join(ROOT, "tools", "mpiexec"), "--which"], capture_output=True,
+                             text=True, check=True).stdout.strip()
+    return [mpiexec, "-n", str(ranks)]
+
+
+def run(out: str, overrides: list, ranks: int) -> float:
+    sets = [a for o in overrides for a in ("--set", o)]
+    start = time.perf_counter()
+    scene = os.path.join(ROOT, "runs", "taylor_impact.toml")
+    subprocess.run([*launcher(ranks), sys.executable, "-m", "parsph", "run", scene, "--out", out, "--overwrite",
+                    "--quiet", *sets, "--set", 'output.snapshot_fields=["position","plastic_strain"]'], check=True)
+    return time.perf_counter() - start
+
+
+def measure(out: str) -> dict:
+    with h5py.File(os.path.join(out, "history.h5"), "r") as h:
+        series = {k: h[k][()] for k in ("length", "total_energy", "kinetic_energy", "disorder")}
+    with h5py.File(os.path.join(out, "snapshots.h5"), "r") as f:
+        steps = sorted(k for k in f if k.startswith("step_"))
+        first, last = f[steps[0]]["position"][()], f[steps[-1]]
+        x, strain = last["position"][()], last["plastic_strain"][()]
+    initial = series["kinetic_energy"][0]
+    return {"particles": len(x), "length": series["length"].min() / first[:, 1].max(),
+            "width": 2 * np.abs(x[:, 0]).max() * 1e3, "strain": strain.max(),
+            "energy": np.abs(series["total_energy"] - initial).max() / initial,
+            "disorder": series["disorder"][-1], "x": x, "plastic": strain}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ranks", type=int, default=2)
+    parser.add_argument("--out", default=os.path.join(ROOT, "results", "taylor_study"))
+    args = parser.parse_args()
+    rows = []
+    for k, (label, overrides) in enumerate(CASES):
+        out = os.path.join(args.out, f"case{k}")
+        seconds = run(out, overrides, args.ranks)
+        rows.append((label, measure(out), seconds))
+    print(f"{'case':26s} {'particles':>9s} {'L/L0':>7s} {'foot [mm]':>9s} {'max eps_p':>9s} {'energy':>8s} "
+          f"{'disorder':>8s} {'wall [s]':>8s}")
+    for label, m, seconds in rows:
+        print(f"{label:26s} {m['particles']:9d} {m['length']:7.4f} {m['width']:9.3f} {m['strain']:9.3f} "
+              f"{m['energy']:8.1e} {m['disorder']:8.4f} {seconds:8.1f}")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(rows), figsize=(2.3 * len(rows) + 1.2, 5.2), sharey=True)
+    for ax, (label, m, _) in zip(axes, rows):
+        size = 60.0 / np.sqrt(m["particles"])
+        sc = ax.scatter(m["x"][:, 0] * 1e3, m["x"][:, 1] * 1e3, c=m["plastic"], s=size, vmin=0, vmax=1.5,
+                        cmap="viridis")
+        ax.set_aspect("equal")
+        ax.set_title(label, fontsize=8)
+        ax.set_xlabel("x [mm]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[0].set_ylabel("y [mm]", fontsize=8)
+    fig.colorbar(sc, ax=list(axes), label="equivalent plastic strain", shrink=0.8)
+    path = os.path.join(args.out, "taylor_impact.png")
+    fig.savefig(path, dpi=120)
+    print(path)
+
+
+if __name__ == "__main__":
+    main()
