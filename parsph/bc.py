@@ -137,16 +137,23 @@ class Tractions:
         self.items = []
         for i, spec in enumerate(specs):
             index = np.flatnonzero(masks[spec["group"]])
-            force = values(spec, f"tractions[{i}]", X[index], gid[index], parameters) * share[index, None]
-            self.items.append((index, force, spec["ramp"]))
+            area = share[index, None] if spec["area"] is None else spec["area"]
+            force = values(spec, f"tractions[{i}]", X[index], gid[index], parameters) * area
+            self.items.append((index, force, spec))
 
     def __bool__(self) -> bool:
         return bool(self.items)
 
     def add(self, force: np.ndarray, t: float) -> None:
-        """Add the traction forces at time t to `force` (owned particles)."""
-        for index, f, ramp in self.items:
-            force[index] += f * (1.0 if ramp <= 0 else min(t / ramp, 1.0))
+        """Add the traction forces at time t to `force` (owned particles): ramped up over
+        `ramp`, zero from `duration` on, times exp(-t / decay)."""
+        for index, f, spec in self.items:
+            factor = 1.0 if spec["ramp"] <= 0 else min(t / spec["ramp"], 1.0)
+            if spec["duration"] is not None and t >= spec["duration"]:
+                factor = 0.0
+            if spec["decay"] is not None:
+                factor *= math.exp(-t / spec["decay"])
+            force[index] += f * factor
 
 
 def apply_initial_conditions(specs: list, masks: dict, X, gid, u, v, parameters: dict) -> None:

@@ -16,12 +16,12 @@ from parsph import config, geometry
 from parsph.errors import InputError
 from parsph.formulations import galerkin
 from parsph.geometry.gauss_points import BoxGaussPoints
-from parsph.geometry.stress_points import BoxStressPoints
+from parsph.geometry.stress_points import stress_points_of
 from parsph.parallel.decomposition import LocalBody, block_cuts, localize, nearby, partition
 from parsph.parallel.runtime import collective, warn
 
 PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": geometry.Cylinder,
-         "ring": geometry.Ring, "disk": geometry.Disk}
+         "ring": geometry.Ring, "disk": geometry.Disk, "polar_ring": geometry.PolarRing}
 
 
 def _generators(parts: list, where: str, dim: int) -> list:
@@ -74,10 +74,12 @@ def _block(gens: list, dim: int, comm) -> dict:
 
 
 def _part_spacing(part: dict) -> float:
-    """A part's nominal particle spacing: its lattice spacing, or (volume / count)^(1/D) for
-    a random patch."""
+    """A part's nominal particle spacing: its lattice spacing (a polar ring's coarser one),
+    or (volume / count)^(1/D) for a random patch."""
     if "spacing" in part:
         return part["spacing"]
+    if part["shape"] == "polar_ring":
+        return PARTS["polar_ring"](**{k: v for k, v in part.items() if k != "shape"}).spacing
     size = np.subtract(part["upper"], part["lower"])
     return float(np.prod(size) / part["count"]) ** (1.0 / len(size))
 
@@ -118,7 +120,7 @@ def _spacing(parts: list, measure: np.ndarray, dim: int) -> np.ndarray:
     """Particle spacing: the lattice spacing of the part a particle came from, or
     measure^(1/d) for random particle sets (boundary particles of a node lattice keep the
     lattice spacing although their lumped volume is smaller)."""
-    lattice = [p["spacing"] for p in parts if "spacing" in p]
+    lattice = [_part_spacing(p) for p in parts if p["shape"] != "random_patch"]
     if len(lattice) == len(parts):
         return np.full(len(measure), min(lattice))
     return measure ** (1.0 / dim)
@@ -165,7 +167,7 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
     owned["mass"] = owned["volume"] * body["material"]["density"]
     if any(b["formulation"]["type"] == "kbm" for b in config.bodies(scene)):  # quadrature weights
         owned["weight"] = owned["volume"] if body["formulation"]["type"] != "kbm" else \
-            BoxStressPoints(gens[0], factor).particle_weights(owned["gid"])
+            stress_points_of(gens[0], factor).particle_weights(owned["gid"])
     neighbours = scene["kernel"]["neighbours"]
     if neighbours > 0:
         owned["support"] = _neighbour_support(X, neighbours, comm)
@@ -180,7 +182,7 @@ def build_integration_points(scene: dict, comm) -> dict:
     "gid", "X", "volume" (quadrature weight), "body". Collective."""
     specs = config.bodies(scene)
     dim = scene["scene"]["dimension"]
-    kinds = {galerkin.STRESS_POINTS: BoxStressPoints, galerkin.GAUSS_POINTS: BoxGaussPoints}
+    kinds = {galerkin.STRESS_POINTS: stress_points_of, galerkin.GAUSS_POINTS: BoxGaussPoints}
     out = {}
     for name, kind in kinds.items():
         users = [b for b, spec in enumerate(specs) if galerkin.integration_set(spec["formulation"]) == name]

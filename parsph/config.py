@@ -215,8 +215,14 @@ PART_KEYS: dict[str, dict[str, Key]] = {
         "center": Key("vector", REQUIRED), "radius": Key("float", REQUIRED, positive),
         "spacing": Key("float", REQUIRED, positive),
     },
+    "polar_ring": {  # a polar lattice: particles on both surfaces (KBM's stress points on a ring)
+        "center": Key("vector", REQUIRED), "inner_radius": Key("float", REQUIRED, positive),
+        "outer_radius": Key("float", REQUIRED, positive),
+        "radial": Key("int", REQUIRED, positive, "rows of particles, from the inner to the outer surface"),
+        "angular": Key("int", REQUIRED, positive, "particles per row"),
+    },
 }
-PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,)}
+PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,), "polar_ring": (2,)}
 
 BC_KEYS = {
     "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement")),
@@ -235,6 +241,10 @@ TRACTION_KEYS = {
     "expression": Key("strlist", None, doc="instead of value: one expression of the reference position "
                                            "x, y, z and the parameters per component [Pa]"),
     "ramp": Key("float", 0.0, non_negative, "time over which the traction ramps up from 0 [s]"),
+    "duration": Key("float", None, positive, "the traction acts for t < duration (default: for ever) [s]"),
+    "decay": Key("float", None, positive, "time constant tau of a factor exp(-t / tau) (default: none) [s]"),
+    "area": Key("float", None, positive, "surface each particle of the group carries [m^2] (default: its "
+                                         "measure^((d-1)/d) times the thickness, a lattice's face)"),
 }
 WALL_KEYS = {
     "group": Key("str", "all", doc="particles that can touch the wall"),
@@ -378,7 +388,7 @@ def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts") -> list[
                 _vector_len(f"{path}.{name}", part[name], dim)
         if "lower" in part and any(lo >= hi for lo, hi in zip(part["lower"], part["upper"])):
             raise InputError(f"{path}: lower must be < upper in every component")
-        if shape == "ring" and part["inner_radius"] >= part["outer_radius"]:
+        if shape in ("ring", "polar_ring") and part["inner_radius"] >= part["outer_radius"]:
             raise InputError(f"{path}.inner_radius must be < outer_radius")
         parts.append(part)
     if not parts:
@@ -805,14 +815,19 @@ def _value_or_expression(path: str, item: dict, raw: dict, dim: int) -> None:
 
 
 def _check_integration_points(body: dict, where: str, scene: dict) -> None:
-    """kbm places its stress points in the cells of a box lattice (geometry.stress_points),
-    efg with cell integration its Gauss points in cells over one (geometry.gauss_points)."""
+    """kbm places its stress points in the cells of a box lattice or of a polar ring
+    (geometry.stress_points), efg with cell integration its Gauss points in cells over a
+    box lattice (geometry.gauss_points)."""
     form = body["formulation"]
     parts = body["parts"]
     what = {"kbm": "stress points in the cells of", "efg": "Gauss points in background cells over"}[form["type"]]
-    if (form["type"] == "kbm" or form["integration"] == "cells") and (
-            len(parts) != 1 or parts[0]["shape"] != "box" or parts[0]["placement"] != "cell"):
-        raise InputError(f"formulation.type = '{form['type']}' places {what} one box lattice: "
+    box = len(parts) == 1 and parts[0]["shape"] == "box" and parts[0]["placement"] == "cell"
+    polar = len(parts) == 1 and parts[0]["shape"] == "polar_ring"
+    if form["type"] == "kbm" and not (box or polar):
+        raise InputError(f"formulation.type = 'kbm' places {what} one lattice: {where}.parts must be a single "
+                         "box with placement = 'cell' or a single polar_ring")
+    if form["type"] == "efg" and form["integration"] == "cells" and not box:
+        raise InputError(f"formulation.type = 'efg' places {what} one box lattice: "
                          f"{where}.parts must be a single box with placement = 'cell'")
     if scene["symmetry"]:
         raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' (its "

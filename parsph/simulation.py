@@ -195,6 +195,7 @@ class Simulation:
         self.J = np.ones(keep)
         self.psi = np.zeros(keep)
         self.no_state = np.zeros((keep, 0))  # the hyperelastic laws carry no per-point state
+        self.broken = np.zeros(n, bool)  # failed particles (materials.damage), set at commits
         self.f_int = np.zeros((n, dim))
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
@@ -274,8 +275,10 @@ class Simulation:
                     points.owned(name)[:] = points.owned(name + "_trial")
         for b in self.bodies:
             if b.failure_strain is not None:
-                damage.grow(self.damage_state(b)[0][b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
+                committed = self.damage_state(b)[0]
+                damage.grow(committed[b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
                             self.support[b.lo:b.hi], dt)
+                self.broken[b.lo:b.hi] = committed[b.lo:b.hi, damage.DAMAGE] >= 1.0
 
     def unstable_point(self, points: str, q: int) -> ParsphError:
         """The error for owned point q of set `points`, inverted or with a stress that is
@@ -345,7 +348,7 @@ class Simulation:
         for b in self.bodies:  # in row order: the first particle with the smallest step
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
-                self._omega_hg2, b.constants.wave_speed, b.law.law_id, b.constants.values, self.dim)
+                self._omega_hg2, b.constants.wave_speed, b.law.law_id, b.constants.values, self.dim, self.broken)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -718,8 +721,8 @@ class Simulation:
         return out
 
     def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
-        """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law alone (with
-        the committed state: the stress of the last evaluation)."""
+        """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law (with the
+        committed state: the stress of the last evaluation) and its damage."""
         F = np.ascontiguousarray(self.F[sel])
         P = np.empty_like(F)
         body = self.body[sel]
@@ -729,6 +732,10 @@ class Simulation:
             part = np.empty_like(F[rows])
             update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, b.constants.values, state,
                             state.copy(), part, np.empty(len(rows)))
+            if b.failure_strain is not None:
+                damage.degraded_stresses(part, np.ascontiguousarray(F[rows]), self.dim,
+                                         np.ascontiguousarray(self.damage_state(b)[0][sel[rows]]),
+                                         np.empty((update.WORK, 3, 3)))
             P[rows] = part
         return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
 
@@ -751,8 +758,8 @@ class Simulation:
 
     def energy_sums(self) -> dict:
         """This rank's parts of the energies of each body, exact: strain (sum V^0 psi of the
-        owned integration points), plastic work (sum V^0 w_p), the work damage withheld
-        (sum V^0 w_D, materials.damage), hourglass (the particles' penalty, or the work
+        owned integration points), plastic work (sum V^0 w_p), damage work (the work the
+        particles have taken beyond their strain energy, sum V^0 (W - psi): materials.damage), hourglass (the particles' penalty, or the work
         absorbed on this rank by the paper form, plus the penalty
         released at reference updates) and external work."""
         out = {"strain": [], "plastic": [], "damage": [], "hourglass": [], "external": []}
@@ -763,9 +770,9 @@ class Simulation:
             plastic = total(np.zeros(0)) if b.law.state != "plastic_state" else total(b.formulation.integrated(
                 self, b, lambda A: A["plastic_state_trial"][:, elastoplastic.PLASTIC_WORK]))
             out["plastic"].append(plastic)
-            withheld = np.zeros(0) if b.failure_strain is None else \
-                self.volume[lo:hi] * self.damage_state(b)[1][lo:hi, damage.WORK]
-            out["damage"].append(total(withheld))
+            taken = np.zeros(0) if b.failure_strain is None else \
+                self.volume[lo:hi] * (self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi])
+            out["damage"].append(total(taken))
             out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
             out["external"].append(acc["external_work"])
         return out

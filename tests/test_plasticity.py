@@ -236,3 +236,19 @@ def test_inverted_point_gives_nan():
     c = law()
     _, psi, _ = evaluate(c, np.diag([1.0, -1.0, 1.0]), elastoplastic.initial_state(1))
     assert math.isnan(psi)
+
+
+def test_scene_keys_of_plasticity_and_damage_are_checked():
+    """A softening faster than 3 mu, damage on a fluid or on stress points, a yield stress on
+    an elastic law: each refused with a message naming the key."""
+    from parsph.errors import InputError
+    from physics import scene_from
+
+    taylor = ["material.failure_strain=0.1"]
+    assert scene_from("taylor_impact", taylor)["material"]["failure_strain"] == 0.1
+    with pytest.raises(InputError, match=r"material.hardening_modulus = -1e\+11 softens faster"):
+        scene_from("taylor_impact", ["material.hardening_modulus=-1e11"])
+    with pytest.raises(InputError, match="material.yield_stress does not apply to model 'neo_hookean'"):
+        scene_from("taylor_impact", ["material.model='neo_hookean'"])
+    with pytest.raises(InputError, match="material.failure_strain: damage is for solids computed at the particles"):
+        scene_from("rubber_ring", ["material.failure_strain=0.1"])

@@ -256,7 +256,8 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     # the step parsph's own CFL estimate would allow (cfl = 1), for the record
     body = sim.bodies[0]
     stable = float(tlsph.stable_time_step(0, n, sim.fs, sim.F, sim.J, sim.ref.min_spacing, sim.ref.stiffening,
-                                          sim._omega_hg2, body.constants.wave_speed, body.law.law_id, dim)[0])
+                                          sim._omega_hg2, body.constants.wave_speed, body.law.law_id,
+                                          body.constants.values, dim, sim.broken)[0])
     for _ in range(warmup):
         sim.step()
     start = time.perf_counter()

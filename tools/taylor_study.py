@@ -83,16 +83,18 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(rows), figsize=(2.3 * len(rows) + 1.2, 5.2), sharey=True)
+    fig, axes = plt.subplots(1, len(rows), figsize=(2.1 * len(rows) + 1.2, 5.0))
     for ax, (label, m, _) in zip(axes, rows):
         size = 60.0 / np.sqrt(m["particles"])
         sc = ax.scatter(m["x"][:, 0] * 1e3, m["x"][:, 1] * 1e3, c=m["plastic"], s=size, vmin=0, vmax=1.5,
                         cmap="viridis")
+        ax.set_xlim(-5.5, 5.5)
+        ax.set_ylim(-0.5, 23.5)
         ax.set_aspect("equal")
         ax.set_title(label, fontsize=8)
         ax.set_xlabel("x [mm]", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0].set_ylabel("y [mm]", fontsize=8)
+    axes[0].set_ylabel("y [mm] (the wall at y = 0.175 mm)", fontsize=8)
     fig.colorbar(sc, ax=list(axes), label="equivalent plastic strain", shrink=0.8)
     path = os.path.join(args.out, "taylor_impact.png")
     fig.savefig(path, dpi=120)

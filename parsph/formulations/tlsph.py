@@ -147,7 +147,8 @@ def stress_at(dim, law, updated, i, fs, Fr, w, c, state, trial, damaged, damaged
     """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
     updated reference [V §3.1], the material update (new state in trial[i]), its damage
     (materials.damage, if `damaged` has columns), J, psi and VP[i] = w P, or w P F^rT =
-    V^r P^r [V eq. 14]. Returns whether the point is inverted or its stress not finite."""
+    V^r P^r [V eq. 14]. Returns whether the point is inverted or its stress not finite
+    (never for a failed point, which carries no stress)."""
     if updated:
         for a in range(dim):
             for b in range(dim):
@@ -155,9 +156,13 @@ def stress_at(dim, law, updated, i, fs, Fr, w, c, state, trial, damaged, damaged
                 for k in range(dim):
                     s += fs[i, a, k] * Fr[i, k, b]
                 F[i, a, b] = s
-    e = update.update(law, F[i], dim, c, state, trial, i, P, work)
-    if damaged.shape[1] > 0:
-        damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
+    broken = damaged.shape[1] > 0 and damaged[i, damage.DAMAGE] >= 1.0
+    if broken:  # failed: no stress, the law is not evaluated
+        e = damage.failed(F[i], dim, damaged, damaged_trial, i, P)
+    else:
+        e = update.update(law, F[i], dim, c, state, trial, i, P, work)
+        if damaged.shape[1] > 0:
+            damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
     J[i] = det(F[i], dim)
     psi[i] = e
     for a in range(dim):
@@ -169,7 +174,7 @@ def stress_at(dim, law, updated, i, fs, Fr, w, c, state, trial, damaged, damaged
                 VP[i, a, b] = w * s
             else:
                 VP[i, a, b] = w * P[a, b]
-    return not (math.isfinite(e) and J[i] > 0.0)
+    return not (broken or (math.isfinite(e) and J[i] > 0.0))
 
 
 @njit(cache=True, inline="always")
@@ -383,7 +388,7 @@ def principal_stretches(F, dim):
 
 
 @njit(cache=True)
-def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, law, c, dim):
+def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed, law, c, dim, broken):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
@@ -395,11 +400,14 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed,
     principal stretches of fs is the distortion measure of the adaptive reference update.
     In the total-Lagrangian formulation fs and F are the same array. Also returns the first
     particle with the smallest step (-1 if there is none); the first flattened or inverted
-    particle i gives (0, inf, i)."""
+    particle i gives (0, inf, i). Failed particles (broken) are left out: they carry no
+    stress."""
     dt = np.inf
     worst = 0.0
     smallest = -1
     for i in range(lo, hi):
+        if broken[i]:  # failed (materials.damage): no stiffness
+            continue
         s_min, s_max = principal_stretches(F[i], dim)
         f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim)
         stiffening = update.stiffening(law, s_max, J[i], c)

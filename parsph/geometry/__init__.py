@@ -4,7 +4,7 @@ particle group selection."""
 
 from .groups import select
 from .lattice import MAX_PARTICLES, Box, box
-from .shapes import Cylinder, Disk, Ring, close_pairs, cylinder, disk, ring, shadowed, union
+from .shapes import Cylinder, Disk, PolarRing, Ring, close_pairs, cylinder, disk, ring, shadowed, union
 from .smoothing import support_for_neighbours, support_from_spacing
 from .voronoi import RandomPatch, random_box, random_patch
 
@@ -13,6 +13,7 @@ __all__ = [
     "Box",
     "Cylinder",
     "Disk",
+    "PolarRing",
     "RandomPatch",
     "Ring",
     "box",

@@ -172,3 +172,37 @@ def union(*parts, tol):
     index = np.arange(len(positions))
     keep = ~shadowed(positions, index, positions, index, tol)
     return positions[keep], volumes[keep]
+
+
+class PolarRing:
+    """2D annulus as a polar lattice, for the stress points of KBM on a ring [R §9.5-9.6]:
+    `radial` rows of particles at radii evenly spaced from r_in to r_out (on both surfaces),
+    each of `angular` particles evenly spaced in angle; a particle's volume is its annular
+    sector, radii halfway to the next rows (clipped at the surfaces) and angles halfway to
+    its neighbours, so the volumes sum to π (r_out² - r_in²). Row after row, counter-clockwise
+    from the +x axis."""
+
+    blockwise = True
+
+    def __init__(self, center, inner_radius, outer_radius, radial, angular):
+        self.center = _vector(center, "center", "polar_ring", dim=2)
+        r_in = _positive(inner_radius, "inner_radius", "polar_ring")
+        r_out = _positive(outer_radius, "outer_radius", "polar_ring")
+        if r_in >= r_out:
+            raise ValueError(f"polar_ring: inner_radius={r_in!r} must be < outer_radius={r_out!r}")
+        if int(radial) < 2 or int(angular) < 3:
+            raise ValueError(f"polar_ring: needs radial >= 2 and angular >= 3, got {radial}, {angular}")
+        _check_count("polar_ring", float(radial) * float(angular), f"{radial} x {angular} particles")
+        self.shape = (int(radial), int(angular))
+        self.radius = np.linspace(r_in, r_out, self.shape[0])
+        self.dtheta = 2.0 * math.pi / self.shape[1]
+        edges = np.concatenate([[r_in], 0.5 * (self.radius[1:] + self.radius[:-1]), [r_out]])
+        self.volume = 0.5 * (edges[1:] ** 2 - edges[:-1] ** 2) * self.dtheta
+        self.count = self.shape[0] * self.shape[1]
+        self.spacing = max(self.radius[1] - self.radius[0], r_out * self.dtheta)  # the coarser direction
+
+    def rows(self, start: int, stop: int):
+        row, column = np.divmod(np.arange(start, stop), self.shape[1])
+        theta = column * self.dtheta
+        positions = self.center + self.radius[row][:, None] * np.column_stack((np.cos(theta), np.sin(theta)))
+        return positions, self.volume[row].copy()

@@ -1,5 +1,5 @@
-"""Stress points of a box lattice [R §5.2] and the quadrature weights of particles and stress
-points together.
+"""Stress points of a box lattice or a polar ring [R §5.2] and the quadrature weights of
+particles and stress points together.
 
 [R] intersperses stress points between the particles without saying where (DATA_SHEET §A);
 the counts it prints fit one stress point at the centre of each cell of the particle
@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from .lattice import Box
+from .shapes import PolarRing
 from .voronoi import _cells
 
 MARGIN = 3  # lattice rows at each end of an axis whose cells differ from the interior's
@@ -82,3 +83,37 @@ class BoxStressPoints:
         rows = np.unravel_index(index, self.box.shape, order="F")
         small = tuple(_small_index(i, n, m) for i, n, m in zip(rows, self.box.shape, self.small))
         return self.scale * self._particle_volume[small]
+
+
+class PolarStressPoints:
+    """The stress points of a polar lattice (parsph.geometry.shapes.PolarRing): one at the
+    centre of every polar cell, (radial - 1) x angular, row after row. Weights split each
+    cell as Voronoi cells split a square one: half to its stress point, an eighth to each
+    corner particle; they sum to the annulus' area. Same interface as BoxStressPoints."""
+
+    blockwise = True
+
+    def __init__(self, ring, scale: float = 1.0):
+        self.ring, self.scale = ring, scale
+        radial, angular = ring.shape
+        self.shape = (radial - 1, angular)
+        self.count = self.shape[0] * self.shape[1]
+        r = ring.radius
+        self._cell = 0.5 * (r[1:] ** 2 - r[:-1] ** 2) * ring.dtheta  # area of the cells of each row
+        self._middle = 0.5 * (r[1:] + r[:-1])
+
+    def rows(self, start: int, stop: int):
+        row, column = np.divmod(np.arange(start, stop), self.shape[1])
+        theta = (column + 0.5) * self.ring.dtheta
+        positions = self.ring.center + self._middle[row][:, None] * np.column_stack((np.cos(theta), np.sin(theta)))
+        return positions, self.scale * 0.5 * self._cell[row]
+
+    def particle_weights(self, index: np.ndarray) -> np.ndarray:
+        row = np.asarray(index) // self.ring.shape[1]
+        cells = np.concatenate([[0.0], self._cell, [0.0]])  # the cells below and above each row
+        return self.scale * 0.25 * (cells[row] + cells[row + 1])
+
+
+def stress_points_of(lattice, scale: float = 1.0):
+    """The stress points of a part's lattice: a box (cell placement) or a polar ring."""
+    return PolarStressPoints(lattice, scale) if isinstance(lattice, PolarRing) else BoxStressPoints(lattice, scale)

@@ -8,14 +8,18 @@ positive principal stresses by (1 - D), negative ones are kept, so a failed poin
 carries compression but no tension. Its pairs stay; its hourglass modulus is (1 - D) E
 (formulations.nodal), so the penalty does not hold a crack shut.
 
-The degraded stress derives from no energy, so the loop keeps the work it withholds,
-  w_D = int (P_damaged - P_law) : dF  (<= 0 while a damaged point is stretched),
-per unit reference volume by the trapezoidal rule; strain energy (of the law) + w_D is the
-energy the point has taken, and the balance of the run stays checkable.
+A fully failed point carries no stress at all (not even compression): it would otherwise
+be crushed by its neighbours into an unstable state; its law is no longer evaluated.
+
+The degraded stress derives from no energy, so the loop keeps the work each point has
+taken, W = int P : dF (trapezoidal rule, per unit reference volume), and reports the
+difference to the law's strain energy, W - psi, as damage work (all of W once the point
+has failed: its strain energy is then reported as 0); strain energy + damage work is the
+work the point has taken, and the balance of the run stays checkable.
 
 The state row (committed; the stress evaluation writes the trial row): D, the largest
-principal strain at the last evaluation, w_D, P_law - P_damaged and F of the last
-evaluation (3 x 3 each, row-major, the model's dim x dim block used).
+principal strain at the last evaluation, W, and P and F of the last evaluation (3 x 3
+each, row-major, the model's dim x dim block used).
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from parsph.materials.elastic import det, inverse, right_cauchy_green
 from parsph.materials.elastoplastic import symmetric_eigen
 
 COLUMNS = 21
-DAMAGE, STRAIN, WORK, DELTA, PREVIOUS = 0, 1, 2, 3, 12
+DAMAGE, STRAIN, WORK, STRESS, PREVIOUS = 0, 1, 2, 3, 12
 RATE = 0.4  # damage front speed over the sound speed [G eq. 45]
 
 
@@ -42,8 +46,8 @@ def initial_state(n: int) -> np.ndarray:
 @njit(cache=True)  # not inlined: stages without damage do not compile it
 def degrade(P, F, dim, state, trial, i, work):
     """Scale the positive principal Cauchy stresses of P (at F, point i) by 1 - D from the
-    committed state[i]; write trial[i] (the strain, w_D, P_law - P, F). `work`: 3x3 scratch
-    matrices (at least 5)."""
+    committed state[i]; write trial[i] (the strain, W, P, F). `work`: 3x3 scratch matrices
+    (at least 5)."""
     D = state[i, DAMAGE]
     C, N, sigma, Finv = work[0], work[1], work[2], work[3]
     values = work[4][0]
@@ -66,22 +70,51 @@ def degrade(P, F, dim, state, trial, i, work):
     symmetric_eigen(sigma, values, N)
     for k in range(3):
         values[k] *= (1.0 - D) if values[k] > 0.0 else 1.0
-    work_rate = 0.0
     for a in range(dim):
         for b in range(dim):
             s = 0.0
             for k in range(3):
                 for m in range(dim):
                     s += N[a, k] * values[k] * N[m, k] * Finv[b, m]
-            damaged = J * s
-            delta = P[a, b] - damaged
+            P[a, b] = J * s
+    _record(P, F, dim, state, trial, i)
+
+
+@njit(cache=True)
+def failed(F, dim, state, trial, i, P):
+    """A failed point (D = 1): P = 0, W completed for the step; returns its reported
+    strain energy, 0."""
+    for a in range(dim):
+        for b in range(dim):
+            P[a, b] = 0.0
+    _record(P, F, dim, state, trial, i)
+    trial[i, STRAIN] = state[i, STRAIN]
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _record(P, F, dim, state, trial, i):
+    """trial[i]: D, W += (P_n + P) : (F - F_n) / 2, P and F of this evaluation."""
+    work_done = 0.0
+    for a in range(dim):
+        for b in range(dim):
             column = 3 * a + b
-            work_rate += (delta + state[i, DELTA + column]) * (F[a, b] - state[i, PREVIOUS + column])
-            trial[i, DELTA + column] = delta
+            work_done += (P[a, b] + state[i, STRESS + column]) * (F[a, b] - state[i, PREVIOUS + column])
+            trial[i, STRESS + column] = P[a, b]
             trial[i, PREVIOUS + column] = F[a, b]
-            P[a, b] = damaged
-    trial[i, DAMAGE] = D
-    trial[i, WORK] = state[i, WORK] - 0.5 * work_rate
+    trial[i, DAMAGE] = state[i, DAMAGE]
+    trial[i, WORK] = state[i, WORK] + 0.5 * work_done
+
+
+@njit(cache=True)
+def degraded_stresses(P, F, dim, state, work):
+    """The damaged stress of every row of a stack (output): degrade, or 0 for failed rows."""
+    trial = state.copy()
+    for n in range(F.shape[0]):
+        if state[n, DAMAGE] >= 1.0:
+            failed(F[n], dim, state, trial, n, P[n])
+        else:
+            degrade(P[n], F[n], dim, state, trial, n, work)
 
 
 def grow(state: np.ndarray, failure_strain: float, speed: float, support: np.ndarray, dt: float) -> None:

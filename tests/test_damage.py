@@ -1,0 +1,162 @@
+"""Tensile damage [G eq. 45-46] (materials/damage.py, `material.failure_strain`): the
+degraded stress in principal axes, the growth law, and a notched strip pulled to failure:
+it breaks across the notch, the energy balance (with the damage work) closes,
+and the run is the same bit for bit on 1 and 3 ranks and across a restart."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from conftest import assert_identical_outputs, parsph
+from parsph.diagnostics import global_diagnostics
+from parsph.materials import damage
+from physics import simulation
+
+
+def degraded(P: np.ndarray, F: np.ndarray, D: float) -> tuple:
+    """(P after degrade, the trial row) at one point with damage D."""
+    state = damage.initial_state(1)
+    state[0, damage.DAMAGE] = D
+    trial = state.copy()
+    P = P.copy()
+    damage.degrade(P, np.ascontiguousarray(F), F.shape[0], state, trial, 0, np.empty((7, 3, 3)))
+    return P, trial[0]
+
+
+def cauchy(P, F):
+    return P @ F.T / np.linalg.det(F)
+
+
+def test_positive_principal_stresses_are_scaled_negative_ones_kept():
+    """A Cauchy stress with principal values (+3, -2, +1) in rotated axes: with D = 0.25
+    they become (2.25, -2, 0.75) in the same axes; with D = 1 only the compression is left."""
+    rng = np.random.default_rng(3)
+    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    F = np.eye(3) + 0.05 * rng.standard_normal((3, 3))
+    sigma = Q @ np.diag([3.0, -2.0, 1.0]) @ Q.T
+    P = np.linalg.det(F) * sigma @ np.linalg.inv(F).T
+    for D, expected in ((0.0, [3.0, -2.0, 1.0]), (0.25, [2.25, -2.0, 0.75]), (1.0, [0.0, -2.0, 0.0])):
+        out, trial = degraded(P, F, D)
+        np.testing.assert_allclose(cauchy(out, F), Q @ np.diag(expected) @ Q.T, atol=1e-12)
+        assert trial[damage.DAMAGE] == D
+    strain = 0.5 * math.log(np.linalg.eigvalsh(F.T @ F).max())
+    assert trial[damage.STRAIN] == pytest.approx(strain, rel=1e-12)
+
+
+def test_damage_grows_at_the_front_speed_only_beyond_the_failure_strain_and_never_heals():
+    """D^(1/3) = 0.4 c0 t / h while the strain exceeds the threshold, capped at 1; no growth
+    below it, and what has grown stays."""
+    c0, h, dt = 2000.0, 1e-3, 1e-8
+    state = damage.initial_state(3)
+    state[:, damage.STRAIN] = [0.09, 0.07, 0.09]
+    for _ in range(100):
+        damage.grow(state, 0.08, c0, np.full(3, h), dt)
+    assert state[0, damage.DAMAGE] == pytest.approx((0.4 * c0 * 100 * dt / h) ** 3, rel=1e-12)
+    assert state[1, damage.DAMAGE] == 0.0
+    state[0, damage.STRAIN] = 0.0  # unloaded: stays
+    before = state[0, damage.DAMAGE]
+    damage.grow(state, 0.08, c0, np.full(3, h), dt)
+    assert state[0, damage.DAMAGE] == before
+    for _ in range(2000):
+        damage.grow(state, 0.08, c0, np.full(3, h), dt)
+    assert state[2, damage.DAMAGE] == 1.0
+
+
+STRIP = """
+[scene]
+name = "notched_strip"
+dimension = 2
+[parameters]
+s = 5.0e-4
+[geometry]
+thickness = 1.0e-3
+[[geometry.parts]]
+shape = "box"
+lower = [0.0, 0.0]
+upper = [10.0e-3, 6.0e-3]
+spacing = "= s"
+[[geometry.parts]]
+shape = "box"
+lower = [14.0e-3, 0.0]
+upper = [24.0e-3, 6.0e-3]
+spacing = "= s"
+[[geometry.parts]]
+shape = "box"
+lower = [10.0e-3, 1.0e-3]
+upper = [14.0e-3, 5.0e-3]
+spacing = "= s"
+[kernel]
+support = 2.0
+[material]
+model = "saint_venant_kirchhoff"
+density = 2700.0
+youngs_modulus = 10.0e9
+poisson_ratio = 0.3
+failure_strain = 0.03
+[formulation]
+type = "tlsph"
+hourglass = 50.0
+hourglass_form = "paper"
+[time]
+end = 1.3e-5
+[groups.held]
+box = { lower = [-1.0, -1.0], upper = [1.0e-3, 1.0] }
+[groups.pulled]
+box = { lower = [23.0e-3, -1.0], upper = [1.0, 1.0] }
+[[bc]]
+type = "fixed"
+group = "held"
+[[bc]]
+type = "velocity"
+group = "pulled"
+value = [50.0, 0.0]
+ramp = 2.0e-6
+[[probes]]
+name = "force"
+group = "pulled"
+quantity = "reaction"
+component = 0
+reduce = "sum"
+[output]
+history_interval = 1.0e-6
+snapshot_interval = 1.0e-5
+snapshot_fields = ["position", "velocity", "damage"]
+"""
+
+
+def test_notched_strip_breaks_across_the_notch_and_the_energy_balance_closes():
+    sim = simulation(STRIP)
+    peak = 0.0
+    while sim.t < 1.3e-5:  # the crack has crossed the neck
+        sim.step(1.3e-5)
+        peak = max(peak, float(sim.reaction()[sim.group_index("pulled"), 0].sum()))
+    d = global_diagnostics(sim)
+    assert abs(d["total_energy"]) < 1e-3 * d["external_work"]  # the balance closes
+    assert d["damage_work"] > 0  # the work the failed particles took, now dissipated
+    n = sim.n_owned
+    D = sim.quantity("damage", np.arange(n))
+    failed = D == 1.0
+    X = sim.X[:n]
+    assert np.all(np.abs(X[failed, 0] - 12e-3) < 4.5e-3)  # at the neck (10-14 mm) and its corners
+    neck_rows = np.unique(X[(X[:, 1] > 1e-3) & (X[:, 1] < 5e-3), 1])
+    assert np.isin(neck_rows, X[failed, 1]).all()  # the crack crosses every row of the neck
+    force = float(sim.reaction()[sim.group_index("pulled"), 0].sum())
+    assert peak > 0 and abs(force) < 0.2 * peak  # no longer carries the load
+
+
+@pytest.mark.mpi
+def test_damage_is_the_same_on_three_ranks_and_across_a_restart(tmp_path):
+    path = tmp_path / "strip.toml"
+    path.write_text(STRIP)
+    one, three, split = tmp_path / "one", tmp_path / "three", tmp_path / "split"
+    for out, ranks, extra in ((one, 1, []), (three, 3, []),
+                              (split, 2, ["--set", "time.max_steps=270", "--set", "output.checkpoint_every=270"])):
+        proc = parsph(["run", path, "--out", out, "--quiet", *extra], ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+    proc = parsph(["run", path, "--out", split, "--quiet", "--restart", "latest"], ranks=3)
+    assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(one, three)
+    assert_identical_outputs(one, split)
