@@ -28,6 +28,8 @@ CASES = {
     "punch_hessian": (["--set", "time.max_steps=20", "--set", "parameters.spacing=1e-3"], (1, 3)),
     # elasto-plastic state (trial and committed), hourglass moduli refreshed at the ghosts
     "taylor_impact": (["--set", "time.max_steps=80"], (1, 3)),
+    # the same at KBM's stress points on a polar ring
+    "ring_shear_bands": (["--set", "time.max_steps=30"], (1, 3)),
 }
 
 

@@ -113,17 +113,18 @@ def test_updated_reference_restart_continues_bit_for_bit(tmp_path):
 
 
 @pytest.mark.mpi
-def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
-    """Taylor bar (J2 plasticity, wall contact): a checkpoint during the impact (step 40),
-    restarted on another rank count, continues exactly, plastic strain and energies too."""
+@pytest.mark.parametrize("scene", ["taylor_impact", "ring_shear_bands"])
+def test_plastic_state_restart_continues_bit_for_bit(tmp_path, scene):
+    """Taylor bar (J2 plasticity at the particles, wall contact) and steel ring (at KBM's
+    stress points too): a checkpoint while they yield (step 40), restarted on another rank
+    count, continues exactly, plastic strain and energies too."""
     names = ("position", "velocity", "J", "plastic_strain", "plastic_work")
     fields = ["--set", "output.snapshot_fields=" + str(list(names)).replace("'", '"')]
     straight = tmp_path / "straight"
-    run(straight, 2, "--set", "time.max_steps=80", *fields, scene="taylor_impact")
+    run(straight, 2, "--set", "time.max_steps=80", *fields, scene=scene)
     split = tmp_path / "split"
-    run(split, 2, "--set", "time.max_steps=40", "--set", "output.checkpoint_every=40", *fields,
-        scene="taylor_impact")
-    run(split, 3, "--set", "time.max_steps=80", "--restart", "latest", *fields, scene="taylor_impact")
+    run(split, 2, "--set", "time.max_steps=40", "--set", "output.checkpoint_every=40", *fields, scene=scene)
+    run(split, 3, "--set", "time.max_steps=80", "--restart", "latest", *fields, scene=scene)
     _, a = final(straight, names)
     _, b = final(split, names)
     assert a["plastic_strain"].max() > 0

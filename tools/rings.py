@@ -1,0 +1,78 @@
+#!/usr/bin/env python3
+"""Measurements on the ring scenes of [R §9.5-9.6] from a run's snapshots.
+
+  tools/rings.py bands OUT   shear bands (runs/ring_shear_bands.toml): at each snapshot, the
+                             particles (not the loaded inner row) whose plastic strain is in
+                             the top 15 %, grouped into connected clusters (particles within
+                             1.5 lattice spacings); a cluster that spans at least 40 % of the
+                             wall is a band, its direction the principal axis of its current
+                             positions; prints the number of bands and the mean and spread of
+                             their angle to the radius through their centre.
+  tools/rings.py hoop OUT    hoop stress (runs/rubber_ring.toml): at each snapshot, the hoop
+                             Cauchy stress of the particles of the middle row, its mean and
+                             its spread (standard deviation over |mean|) around the ring.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import h5py
+import numpy as np
+import scipy.sparse as sparse
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+
+def snapshots(out: str):
+    with h5py.File(f"{out}/snapshots.h5", "r") as f:
+        for step in sorted(k for k in f if k.startswith("step_")):
+            yield f[step].attrs["time"], {name: f[step][name][()] for name in f[step]}
+
+
+def rows(X: np.ndarray) -> tuple:
+    """(row index of each particle by reference radius, the radial spacing)."""
+    radius = np.hypot(*X.T)
+    radii = np.unique(np.round(radius, 12))
+    spacing = radii[1] - radii[0]
+    return np.round((radius - radii[0]) / spacing).astype(int), spacing
+
+
+def bands(out: str) -> None:
+    for t, s in snapshots(out):
+        x, X, strain = s["position"], s["reference_position"], s["plastic_strain"]
+        row, spacing = rows(X)
+        wall = row.max() * spacing
+        hot = np.flatnonzero((row > 0) & (strain > np.percentile(strain[row > 0], 85)) & (strain > 0))
+        pairs = cKDTree(x[hot]).query_pairs(1.5 * spacing, output_type="ndarray")
+        graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(hot),) * 2)
+        _, label = connected_components(graph, directed=False)
+        angles = []
+        for c in np.unique(label):
+            members = hot[label == c]
+            if np.ptp(row[members]) * spacing < 0.4 * wall:
+                continue
+            p = x[members]
+            centre = p.mean(axis=0)
+            axis = np.linalg.svd(p - centre)[2][0]
+            angles.append(np.degrees(np.arccos(min(1.0, abs(axis @ centre) / np.linalg.norm(centre)))))
+        summary = f"{np.mean(angles):5.1f} deg to the radius (spread {np.std(angles):4.1f})" if angles else ""
+        print(f"t = {t:.4g} s: {len(angles):3d} bands {summary}")
+
+
+def hoop(out: str) -> None:
+    for t, s in snapshots(out):
+        x, X, sigma = s["position"], s["reference_position"], s["cauchy_stress"]
+        row, _ = rows(X)
+        mid = row == row.max() // 2
+        theta = np.arctan2(x[mid, 1], x[mid, 0])
+        tangent = np.column_stack([-np.sin(theta), np.cos(theta)])
+        value = np.einsum("na,nab,nb->n", tangent, sigma[mid][:, :2, :2], tangent)
+        spread = value.std() / abs(value.mean()) if value.mean() else 0.0
+        print(f"t = {t:.4g} s: hoop stress at mid-radius {value.mean():.4g} Pa, spread {spread:.2e}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3 or sys.argv[1] not in ("bands", "hoop"):
+        sys.exit(__doc__)
+    {"bands": bands, "hoop": hoop}[sys.argv[1]](sys.argv[2])
