@@ -156,6 +156,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
                     "fraction of the support (default 0.25)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
+        "viscosity": Key("float", 0.0, non_negative,
+                         "Monaghan's artificial viscosity alpha (0: none; for fluids; particle formulations)"),
+        "viscosity_beta": Key("float", 0.0, non_negative, "Monaghan's artificial viscosity beta"),
         "plastic_hourglass": Key("bool", True, None,
                                  "j2_plasticity: a yielded particle's hourglass modulus is its yield stress "
                                  "instead of E [G §4.5] (false: E throughout)"),
@@ -166,6 +169,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "cfl": Key("float", 0.3, in_range(0.0, 1.0, True), "safety factor of the CFL time step"),
         "damping": Key("float", 0.0, non_negative, "mass-proportional damping rate [1/s]"),
         "max_steps": Key("int", 0, non_negative, "stop after this many steps (0 = no limit)"),
+        "step_floor": Key("float", 0.0, in_range(0.0, 1.0, False, True),
+                          "stop with an error naming the particle when the stable step falls below this "
+                          "fraction of the run's first one (0 = never)"),
         "wall_limit": Key("float", 0.0, non_negative,
                           "wall-clock seconds after which the run checkpoints and stops (0 = none)"),
     },
@@ -222,7 +228,8 @@ PART_KEYS: dict[str, dict[str, Key]] = {
         "angular": Key("int", REQUIRED, positive, "particles per row"),
     },
 }
-PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,), "polar_ring": (2,)}
+PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,),
+                   "polar_ring": (2,)}
 
 BC_KEYS = {
     "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement")),
@@ -649,6 +656,8 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
         raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
     if form["type"] in ("sph", "rlm", "kbm", "efg") and form["force_form"] != "pair":
         raise InputError(f"{path}.force_form applies to tlsph and ulsph; {form['type']} has its own force row")
+    if form["type"] in ("kbm", "efg") and (form["viscosity"] > 0 or form["viscosity_beta"] > 0):
+        raise InputError(f"{path}.viscosity applies to tlsph, ulsph, sph and rlm, not to {form['type']}")
     if form["type"] in ("kbm", "efg") and form["hourglass"] > 0:
         raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {form['type']} "
                          "(give 0 or leave it out)")

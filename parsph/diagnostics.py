@@ -2,12 +2,14 @@
 for bit on any number of ranks.
 
 Disorder: the mass-weighted RMS and the maximum of the hourglass error eta_i
-(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), plastic work (dissipated), the work damage
-withheld (materials.damage), hourglass
+(formulations.tlsph.hourglass_error). Energies: kinetic, strain (sum V psi), plastic work
+(dissipated), damage work (taken by damaged and failed particles beyond their strain
+energy: materials.damage), viscous work (absorbed by the artificial viscosity), hourglass
 (minus the work done by the hourglass forces), external work (body force, constraint
-reactions and the work that changes the kinetic energy of prescribed motions) and the balance total = kinetic + strain + plastic + damage + hourglass - external, which is
-constant for an exact integration. Momenta: linear (vector) and angular (scalar in 2D,
-vector in 3D).
+reactions, obstacles' contact and the work that changes the kinetic energy of prescribed
+motions) and the balance total = kinetic + strain + plastic + damage + viscous + hourglass
+- external, which is constant for an exact integration. Momenta: linear (vector) and
+angular (scalar in 2D, vector in 3D).
 """
 
 from __future__ import annotations
@@ -63,7 +65,7 @@ def global_diagnostics(state) -> dict:
     energies = state.energy_sums()
     bodies = state.bodies
     kinetic_parts = [sums(columns[b.lo:b.hi, 2:2 + dim]) for b in bodies] if len(bodies) > 1 else []
-    keys = ("strain", "plastic", "damage", "hourglass", "external")
+    keys = ("strain", "plastic", "damage", "viscous", "hourglass", "external")
     local = [*sums(columns), *(e for key in keys for e in energies[key]),
              *(k for part in kinetic_parts for k in part)]
     parts = allsum(state.comm, local)
@@ -71,16 +73,18 @@ def global_diagnostics(state) -> dict:
     weighted, mass, kinetic = parts[0], parts[1], parts[2:2 + dim]
     momentum, angular = parts[2 + dim:2 + 2 * dim], parts[2 + 2 * dim:columns.shape[1]]
     rest = parts[columns.shape[1]:]
-    strain, plastic, damaged, hourglass, external = (rest[k * count:(k + 1) * count] for k in range(len(keys)))
+    strain, plastic, damaged, viscous, hourglass, external = (rest[k * count:(k + 1) * count]
+                                                             for k in range(len(keys)))
     per_body_kinetic = rest[len(keys) * count:]
     kinetic = sum(kinetic[1:], kinetic[0])
-    strain_all, plastic_all, damage_all, hourglass_all, external_all = (
-        sum(e[1:], e[0]) for e in (strain, plastic, damaged, hourglass, external))
+    strain_all, plastic_all, damage_all, viscous_all, hourglass_all, external_all = (
+        sum(e[1:], e[0]) for e in (strain, plastic, damaged, viscous, hourglass, external))
     out = {
         "kinetic_energy": float(kinetic), "strain_energy": float(strain_all), "plastic_work": float(plastic_all),
-        "damage_work": float(damage_all), "hourglass_energy": float(hourglass_all),
+        "damage_work": float(damage_all), "viscous_work": float(viscous_all), "hourglass_energy": float(hourglass_all),
         "external_work": float(external_all),
-        "total_energy": float(kinetic + strain_all + plastic_all + damage_all + hourglass_all - external_all),
+        "total_energy": float(kinetic + strain_all + plastic_all + damage_all + viscous_all + hourglass_all
+                              - external_all),
         "disorder": math.sqrt(float(weighted) / float(mass)),
         "disorder_max": state.comm.allreduce(eta.max() if len(eta) else 0.0, op=MPI.MAX),
     }
@@ -98,10 +102,11 @@ def global_diagnostics(state) -> dict:
             out[f"strain_energy.{b.name}"] = float(strain[k])
             out[f"plastic_work.{b.name}"] = float(plastic[k])
             out[f"damage_work.{b.name}"] = float(damaged[k])
+            out[f"viscous_work.{b.name}"] = float(viscous[k])
             out[f"hourglass_energy.{b.name}"] = float(hourglass[k])
             out[f"external_work.{b.name}"] = float(external[k])
-            out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + hourglass[k]
-                                                  - external[k])
+            out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + viscous[k]
+                                                  + hourglass[k] - external[k])
     return out
 
 

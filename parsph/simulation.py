@@ -49,6 +49,7 @@ from parsph.walls import Walls
 BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
 UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
 TOTALS = ("hourglass_work",  # absorbed by the "paper" hourglass forces
+          "viscous_work",  # absorbed by the artificial viscosity
           "hourglass_released",  # penalty dropped at reference updates
           "external_work")
 
@@ -63,6 +64,7 @@ class Body:
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
         self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
+        self.density = spec["material"]["density"]
         kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
         self.formulation = kind(spec["formulation"], dim, self.law.law_id)
         self.lo = self.hi = 0
@@ -131,16 +133,21 @@ class Simulation:
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 for name, accs in self.totals.items():
+                    if name not in totals:  # a checkpoint from before this total existed: none so far
+                        continue
                     saved = totals[name] if len(accs) > 1 else [totals[name]]
                     for acc, value in zip(accs, saved):
                         acc.set([Exact.from_json(value)])
                 self.walls.restore(totals["wall_force"])
         self._cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up, for messages
+        self._floor = 0.0  # the smallest stable step allowed (time.step_floor), set below
         self.compute_forces()
         self._external = self.external_force()  # at the current state, for the work integral
         if scene["time"]["dt"] > 0:
             self._cfl_at = (scene["time"]["cfl"] * self._stability()[0], self.step_count)
         self._stable_dt = restart["clock"]["dt"] if restart else self.stable_time_step()[0]
+        self._first_stable = restart["clock"].get("first_stable", 0.0) if restart else self._stability()[0]
+        self._floor = scene["time"]["step_floor"] * self._first_stable
 
     # ----------------------------------------------------------------- set-up helpers
     def _adopt(self, local: LocalBody) -> None:
@@ -200,6 +207,8 @@ class Simulation:
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
         self.hg_psi = np.zeros(n if variational else 0)
+        self.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in self.bodies)
+        self.f_visc = np.zeros((n if self.viscous else 0, dim))
         self.youngs = np.array([b.constants.youngs for b in self.bodies])[self.body]
         arrays = dict(X=self.X, measure=self.measure, volume=self.volume, mass=self.mass, support=self.support,
                       groups=fl["groups"][:keep], u=self.u, v=self.v, d=self.d, F=self.F, fs=self.fs, f=self.f,
@@ -207,6 +216,7 @@ class Simulation:
         if self.updated:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
+        self._find_broken()
         self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
         if any(b.formulation.type in galerkin.TYPES for b in self.bodies):
             with collective(self.comm):
@@ -275,10 +285,15 @@ class Simulation:
                     points.owned(name)[:] = points.owned(name + "_trial")
         for b in self.bodies:
             if b.failure_strain is not None:
-                committed = self.damage_state(b)[0]
-                damage.grow(committed[b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
+                damage.grow(self.damage_state(b)[0][b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
                             self.support[b.lo:b.hi], dt)
-                self.broken[b.lo:b.hi] = committed[b.lo:b.hi, damage.DAMAGE] >= 1.0
+        self._find_broken()
+
+    def _find_broken(self) -> None:
+        """Mark the owned particles that have failed (committed damage 1)."""
+        for b in self.bodies:
+            if b.failure_strain is not None:
+                self.broken[b.lo:b.hi] = self.damage_state(b)[0][b.lo:b.hi, damage.DAMAGE] >= 1.0
 
     def unstable_point(self, points: str, q: int) -> ParsphError:
         """The error for owned point q of set `points`, inverted or with a stress that is
@@ -342,8 +357,9 @@ class Simulation:
 
     def _stability(self) -> tuple:
         """(stable step, largest incremental log strain) over all ranks, from
-        formulations.tlsph.stable_time_step (collective). A step of zero raises the error
-        naming the particle with the smallest step on any rank."""
+        formulations.tlsph.stable_time_step (collective). A step of zero, or below
+        time.step_floor times the first one, raises the error naming the particle with the
+        smallest step on any rank."""
         dt, strain, smallest = np.inf, 0.0, -1
         for b in self.bodies:  # in row order: the first particle with the smallest step
             step, worst, first = tlsph.stable_time_step(
@@ -357,15 +373,20 @@ class Simulation:
         reduced = np.array([-dt, strain])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
-        if not -reduced[0] > 0.0:
+        if not -reduced[0] > self._floor:
             mine = [] if smallest < 0 else [(dt, int(self.gid[smallest]),
                                              tuple((self.X[smallest] + self.u[smallest]).tolist()))]
             _, gid, x = min(c for part in self.comm.allgather(mine) for c in part)
             where = ", ".join(f"{c:.6g}" for c in x)
+            if not -reduced[0] > 0.0:
+                what, why = "collapsed to zero", "is flattened (a principal stretch near zero)"
+            else:
+                what = (f"fell to {-reduced[0]:.3g} s, below time.step_floor = "
+                        f"{self.scene['time']['step_floor']:g} of the first one ({self._first_stable:.3g} s),")
+                why = "is the most flattened (its smallest principal stretch sets the step)"
             error = ParsphError(
-                f"the stable time step collapsed to zero at step {self.step_count}, t = {self.t:.6g}: "
-                f"particle {gid} at ({where}) is flattened (a principal stretch near zero); the run is "
-                f"unstable: {self._advice()}")
+                f"the stable time step {what} at step {self.step_count}, t = {self.t:.6g}: "
+                f"particle {gid} at ({where}) {why}; the run is unstable: {self._advice()}")
             error.agreed = True  # every rank found the same particle and raises this
             raise error
         return -reduced[0], reduced[1]
@@ -387,7 +408,7 @@ class Simulation:
         n = self.n_owned
         clock = time.perf_counter
         seconds = self.stage_seconds
-        stale = {"d"}
+        stale = {"d", "v"}  # moved by the integrator (v is refreshed only if a stage reads it)
         phases = max(len(b.stages) for b in self.bodies)
         for k in range(phases):
             phase = [b.stages[k] for b in self.bodies if k < len(b.stages)]
@@ -403,6 +424,8 @@ class Simulation:
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
+        if self.viscous:
+            force += self.f_visc
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
         if self.tractions:
@@ -468,6 +491,7 @@ class Simulation:
         u_old = self.u[:n].copy()
         v_old = self.v[:n].copy() if self.bcs.moving or self.collocation else None
         f_hg_old = self.f_hg.copy()
+        f_visc_old = self.f_visc.copy()
         f_ext_old = self._external
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t + 0.5 * dt)
@@ -488,6 +512,10 @@ class Simulation:
             work = -0.5 * (f_hg_old + self.f_hg) * du
             for b in paper:
                 self.totals["hourglass_work"][b.index].add(work[b.lo:b.hi])
+        if self.viscous:  # dissipated: the work the viscous forces have absorbed
+            work = -0.5 * (f_visc_old + self.f_visc) * du
+            for b in self.bodies:
+                self.totals["viscous_work"][b.index].add(work[b.lo:b.hi])
         self._external = self.external_force()
         work = 0.5 * (f_ext_old + self._external) * du
         if self.walls.items:
@@ -653,7 +681,7 @@ class Simulation:
             "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in self.point_sets()[1:]},
             "totals": {**totals, "wall_force": self.wall_forces().tolist()},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
-                      "since_update": self.since_update},
+                      "since_update": self.since_update, "first_stable": self._first_stable},
         }
 
     # ----------------------------------------------------------------- read-outs
@@ -759,10 +787,11 @@ class Simulation:
     def energy_sums(self) -> dict:
         """This rank's parts of the energies of each body, exact: strain (sum V^0 psi of the
         owned integration points), plastic work (sum V^0 w_p), damage work (the work the
-        particles have taken beyond their strain energy, sum V^0 (W - psi): materials.damage), hourglass (the particles' penalty, or the work
-        absorbed on this rank by the paper form, plus the penalty
-        released at reference updates) and external work."""
-        out = {"strain": [], "plastic": [], "damage": [], "hourglass": [], "external": []}
+        particles have taken beyond their strain energy, sum V^0 (W - psi):
+        materials.damage), viscous work (absorbed by the artificial viscosity), hourglass
+        (the particles' penalty, or the work absorbed on this rank by the paper form, plus
+        the penalty released at reference updates) and external work."""
+        out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "external": []}
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
@@ -773,6 +802,7 @@ class Simulation:
             taken = np.zeros(0) if b.failure_strain is None else \
                 self.volume[lo:hi] * (self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi])
             out["damage"].append(total(taken))
+            out["viscous"].append(acc["viscous_work"])
             out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
             out["external"].append(acc["external_work"])
         return out

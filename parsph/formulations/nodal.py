@@ -54,6 +54,7 @@ class NodalFormulation:
         self.alpha = options["hourglass"]
         self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
         self.plastic_hourglass = options["plastic_hourglass"]
+        self.viscosity = (options["viscosity"], options["viscosity_beta"])  # Monaghan's alpha, beta
         self.eta = options["hessian"]
         self.weighted_hessian = options["hessian_correction"] == "weighted"
         self.update_every, self.update_strain = (1, 0.0) if self.eulerian else \
@@ -127,5 +128,13 @@ class NodalFormulation:
         reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg")))
+        if any(self.viscosity):
+            def viscosity():
+                ref = sim.ref
+                tlsph.artificial_viscosity(
+                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.d, sim.v, sim.J,
+                    body.density, sim.volume_r if self.updated else sim.volume, sim.mass, sim.support,
+                    body.constants.wave_speed, *self.viscosity, sim.f_visc)
+            out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc",)))
         return out
 

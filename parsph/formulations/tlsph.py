@@ -420,3 +420,35 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, omega_hg2, wave_speed,
         if dt_i < dt:
             dt, smallest = dt_i, i
     return dt, worst, smallest
+
+
+@njit(cache=True)
+def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
+                         f_visc):
+    """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
+    closing in (v_ij . x_ij < 0),
+        Pi_ij = (-alpha c0 mu_ij + beta mu_ij^2) / rho_ij,  mu_ij = l v_ij . x_ij / (|x_ij|^2 + 0.01 l^2),
+    l the mean smoothing length (half the support radii), rho_ij the mean current density
+    rho0 / J, x and v current; the force on i is -sum_j Pi_ij (m_i rho_j g_ij - m_j rho_i g_ji) / 2
+    with the pairs' kernel gradients g (rho = m / V of the volumes they were built with): the
+    usual -m_i sum_j m_j Pi_ij grad W_ij, antisymmetric in i and j (momentum is conserved)."""
+    dim = dx.shape[1]
+    for i in range(lo, hi):
+        for a in range(dim):
+            f_visc[i, a] = 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            approach = 0.0
+            r2 = 0.0
+            for a in range(dim):
+                xa = dx[p, a] + d[j, a] - d[i, a]
+                approach += xa * (v[j, a] - v[i, a])
+                r2 += xa * xa
+            if approach >= 0.0:
+                continue
+            length = 0.25 * (support[i] + support[j])
+            mu = length * approach / (r2 + 0.01 * length * length)
+            pi = (-alpha * c0 * mu + beta * mu * mu) / (0.5 * density * (1.0 / J[i] + 1.0 / J[j]))
+            rho_i, rho_j = mass[i] / gvolume[i], mass[j] / gvolume[j]
+            for a in range(dim):
+                f_visc[i, a] -= 0.5 * pi * (mass[i] * rho_j * g[p, a] - mass[j] * rho_i * g_rev[p, a])

@@ -38,7 +38,7 @@ LAWS = {law.name: law for law in (
 # tensile damage over any solid law (materials.damage), at the particles
 register(Field("damage", "state", owner="damage", columns=damage.COLUMNS,
                initial=lambda X, gid: damage.initial_state(len(X)),
-               doc="committed damage, largest principal strain, withheld work, last stress deficit and F"))
+               doc="committed damage, largest principal strain, work taken, last P and F"))
 # the elasto-plastic state (materials.elastoplastic), wherever the law's stress is evaluated
 for _points in ("particles", "stress_points", "gauss_points"):
     register(Field("plastic_state", "state", owner="j2_plasticity", points=_points, columns=elastoplastic.COLUMNS,

@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
-"""Measurements on the ring scenes of [R §9.5-9.6] from a run's snapshots.
+"""Measurements on [R]'s scenes from a run's snapshots.
 
-  tools/rings.py bands OUT   shear bands (runs/ring_shear_bands.toml): at each snapshot, the
-                             particles (not the loaded inner row) whose plastic strain is in
-                             the top 15 %, grouped into connected clusters (particles within
-                             1.5 lattice spacings); a cluster that spans at least 40 % of the
-                             wall is a band, its direction the principal axis of its current
-                             positions; prints the number of bands and the mean and spread of
-                             their angle to the radius through their centre.
-  tools/rings.py hoop OUT    hoop stress (runs/rubber_ring.toml): at each snapshot, the hoop
-                             Cauchy stress of the particles of the middle row, its mean and
-                             its spread (standard deviation over |mean|) around the ring.
+  tools/measure.py bands OUT   shear bands (runs/ring_shear_bands.toml): at each snapshot, the
+                               particles (not the loaded inner row) whose plastic strain is in
+                               the top 15 %, grouped into connected clusters (particles within
+                               1.5 lattice spacings); a cluster that spans at least 40 % of the
+                               wall is a band, its direction the principal axis of its current
+                               positions; prints the number of bands and the mean and spread of
+                               their angle to the radius through their centre.
+  tools/measure.py hoop OUT    hoop stress (runs/rubber_ring.toml): at each snapshot, the hoop
+                               Cauchy stress of the particles of the middle row, its mean and
+                               its spread (standard deviation over |mean|) around the ring.
+  tools/measure.py drained OUT the funnel (runs/funnel.toml): at each snapshot, the share of
+                               the fluid's mass below y = 0, through the opening.
 """
 
 from __future__ import annotations
@@ -72,7 +74,15 @@ def hoop(out: str) -> None:
         print(f"t = {t:.4g} s: hoop stress at mid-radius {value.mean():.4g} Pa, spread {spread:.2e}")
 
 
+def drained(out: str) -> None:
+    for t, s in snapshots(out):
+        below = s["position"][:, 1] < 0.0
+        print(f"t = {t:.4g} s: {below.mean():.3f} of the fluid below the opening")
+
+
+COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained}
+
 if __name__ == "__main__":
-    if len(sys.argv) != 3 or sys.argv[1] not in ("bands", "hoop"):
+    if len(sys.argv) != 3 or sys.argv[1] not in COMMANDS:
         sys.exit(__doc__)
-    {"bands": bands, "hoop": hoop}[sys.argv[1]](sys.argv[2])
+    COMMANDS[sys.argv[1]](sys.argv[2])
