@@ -9,7 +9,9 @@ the reference updated every 3 steps (the paper's stress setting) or every 30, an
 symmetrised SPH, RLM, KBM with stress points and EFG with nodal and cell integration
 and the Eulerian kernel for SPH, RLM, KBM and nodal EFG (neighbours searched at most every
 30 steps, shape functions rebuilt at every step; timed over a quarter of the steps) (µs
-per particle-step counts particles only, as [R] Tables 5-6 do). Each updated row also gives
+per particle-step counts particles only, as [R] Tables 5-6 do); and total-Lagrangian with
+alpha = 50 (paper form) with the J2 elasto-plastic law (the return mapping's eigen
+decomposition runs at every particle whether it yields or not) and with tensile damage. Each updated row also gives
 the time of one reference update per particle. Compile time and set-up are excluded; each
 case is timed over --steps steps after a warm-up. Prints a table and writes it as JSON.
 
@@ -34,8 +36,12 @@ from parsph.build import build_local  # noqa: E402
 from parsph.simulation import Simulation  # noqa: E402
 
 
+LAWS = {"j2_plasticity": {"model": "j2_plasticity", "yield_stress": 1e6},
+        "damage": {"failure_strain": 0.08}}  # over the elastic block's material
+
+
 def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0,
-          method: str = "tlsph") -> dict:
+          method: str = "tlsph", law: str = "") -> dict:
     side = round(particles ** (1 / dim))
     spacing = 1.0 / side
     raw = {
@@ -49,6 +55,7 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
                         "type": "ulsph" if every else method.split("_")[0], "update_every": every},
         "time": {"end": 1.0},
     }
+    raw["material"].update(LAWS.get(law, {}))
     if method.startswith("efg"):
         raw["formulation"]["integration"] = "cells" if method.endswith("_cells") else "nodal"
     if method.endswith("_eulerian"):
@@ -56,8 +63,8 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
     return config.validate(raw)
 
 
-def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"):
-    scene = block(dim, particles, alpha, form, eta, every, method)
+def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph", law=""):
+    scene = block(dim, particles, alpha, form, eta, every, method, law)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
@@ -70,7 +77,7 @@ def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"
     n = sim.n_owned
     pairs = int(sim.ref.ptr[-1])
     update = sim.stage_seconds.get("reference update", 0.0) / max(sim.updates, 1)
-    return {"method": method, "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
+    return {"method": method + (f" + {law}" if law else ""), "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
             "hourglass_form": form if alpha > 0 else "-", "eta": eta, "update_every": every,
             "steps": steps, "us_per_particle_step": 1e6 * seconds / (steps * n),
             "us_per_particle_update": 1e6 * update / n}
@@ -84,7 +91,8 @@ CASES = (("tlsph", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0)
          ("kbm", 0.0, "variational", 0.0, 0), ("efg", 0.0, "variational", 0.0, 0),
          ("efg_cells", 0.0, "variational", 0.0, 0), ("sph_eulerian", 0.0, "variational", 0.0, 0),
          ("rlm_eulerian", 0.0, "variational", 0.0, 0), ("kbm_eulerian", 0.0, "variational", 0.0, 0),
-         ("efg_eulerian", 0.0, "variational", 0.0, 0))
+         ("efg_eulerian", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0, "j2_plasticity"),
+         ("tlsph", 50.0, "paper", 0.0, 0, "damage"))
 NAMES = {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM", "efg": "EFG nodal", "efg_cells": "EFG cells",
          "sph_eulerian": "SPH Eul.", "rlm_eulerian": "RLM Eul.", "kbm_eulerian": "KBM Eul.",
          "efg_eulerian": "EFG Eul."}
@@ -99,11 +107,11 @@ def main():
     args = ap.parse_args()
     rows = []
     for dim, count in ((2, args.particles_2d), (3, args.particles_3d)):
-        for method, alpha, form, eta, every in CASES:
+        for method, alpha, form, eta, every, *law in CASES:
             steps = args.steps // 4 if method.endswith("_eulerian") else args.steps
-            rows.append(measure(dim, count, alpha, form, steps, eta, every, method))
+            rows.append(measure(dim, count, alpha, form, steps, eta, every, method, *law))
             r = rows[-1]
-            kind = f"UL every {every:2d}" if every else NAMES[method].ljust(11)
+            kind = f"UL every {every:2d}" if every else (NAMES[method] + (f" {law[0]}" if law else "")).ljust(11)
             print(f"{r['dim']}D  {r['particles']:7d} particles  {r['neighbours']:5.1f} neighbours  {kind} "
                   f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s} eta {eta:3.1f}  "
                   f"{r['us_per_particle_step']:.3f} us/particle-step"
