@@ -27,9 +27,10 @@ CASES = {
                   "--set", "formulation.update_every=10"], (1, 2, 3)),
     "punch_hessian": (["--set", "time.max_steps=20", "--set", "parameters.spacing=1e-3"], (1, 3)),
     # elasto-plastic state (trial and committed), hourglass moduli refreshed at the ghosts
-    "taylor_impact": (["--set", "time.max_steps=80"], (1, 3)),
+    "taylor_impact": (["--set", "time.max_steps=50", "--set", "parameters.width=2.8e-3",
+                       "--set", "parameters.length=1.19e-2"], (1, 3)),
     # the same at KBM's stress points on a polar ring
-    "ring_shear_bands": (["--set", "time.max_steps=30"], (1, 3)),
+    "ring_shear_bands": (["--set", "time.max_steps=20"], (1, 3)),
 }
 
 

@@ -13,14 +13,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
-import sys
-import time
 
 import h5py
 import numpy as np
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+from launch import ROOT, run_scene
+
 SPEED, RAMP = 10.0, 1.0e-5  # the scene's pull speed and ramp
 CASES = (  # label, overrides
     ("1.25 mm, alpha = 50", []),
@@ -28,24 +26,6 @@ CASES = (  # label, overrides
     ("0.833 mm, alpha = 50", ["parameters.s=8.333333333333333e-4"]),
     ("0.833 mm, alpha = 0", ["parameters.s=8.333333333333333e-4", "formulation.hourglass=0"]),
 )
-
-
-def launcher(ranks: int) -> list:
-    if ranks == 1:
-        return []
-    mpiexec = subprocess.run(["bash", os.path.join(ROOT, "tools", "mpiexec"), "--which"], capture_output=True,
-                             text=True, check=True).stdout.strip()
-    return [mpiexec, "-n", str(ranks)]
-
-
-def run(out: str, overrides: list, ranks: int) -> float:
-    sets = [a for o in overrides for a in ("--set", o)]
-    start = time.perf_counter()
-    scene = os.path.join(ROOT, "runs", "tensile_failure.toml")
-    subprocess.run([*launcher(ranks), sys.executable, "-m", "parsph", "run", scene, "--out", out, "--overwrite",
-                    "--quiet", *sets, "--set", 'output.snapshot_fields=["position","displacement","damage"]'],
-                   check=True)
-    return time.perf_counter() - start
 
 
 def measure(out: str) -> dict:
@@ -73,7 +53,7 @@ def main() -> None:
     rows = []
     for k, (label, overrides) in enumerate(CASES):
         out = os.path.join(args.out, f"case{k}")
-        seconds = run(out, overrides, args.ranks)
+        seconds = run_scene("tensile_failure", out, overrides, args.ranks, ["position", "displacement", "damage"])
         rows.append((label, measure(out), seconds))
     print(f"{'case':22s} {'particles':>9s} {'peak [kN]':>9s} {'elong. [mm]':>11s} "
           f"{'crack x [mm]: median (range)':>30s} {'energy':>8s} {'wall [s]':>8s}")

@@ -15,14 +15,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
-import sys
-import time
 
 import h5py
 import numpy as np
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+from launch import ROOT, run_scene
+
 CASES = (  # label, overrides
     ("0.35 mm", []),
     ("0.175 mm", ["parameters.spacing=1.75e-4"]),
@@ -30,23 +28,6 @@ CASES = (  # label, overrides
     ("0.35 mm, alpha = 0", ["formulation.hourglass=0"]),
     ("0.35 mm, E in hourglass", ["formulation.plastic_hourglass=false"]),
 )
-
-
-def launcher(ranks: int) -> list:
-    if ranks == 1:
-        return []
-    mpiexec = subprocess.run(["bash", os.path.join(ROOT, "tools", "mpiexec"), "--which"], capture_output=True,
-                             text=True, check=True).stdout.strip()
-    return [mpiexec, "-n", str(ranks)]
-
-
-def run(out: str, overrides: list, ranks: int) -> float:
-    sets = [a for o in overrides for a in ("--set", o)]
-    start = time.perf_counter()
-    scene = os.path.join(ROOT, "runs", "taylor_impact.toml")
-    subprocess.run([*launcher(ranks), sys.executable, "-m", "parsph", "run", scene, "--out", out, "--overwrite",
-                    "--quiet", *sets, "--set", 'output.snapshot_fields=["position","plastic_strain"]'], check=True)
-    return time.perf_counter() - start
 
 
 def measure(out: str) -> dict:
@@ -71,7 +52,7 @@ def main() -> None:
     rows = []
     for k, (label, overrides) in enumerate(CASES):
         out = os.path.join(args.out, f"case{k}")
-        seconds = run(out, overrides, args.ranks)
+        seconds = run_scene("taylor_impact", out, overrides, args.ranks, ["position", "plastic_strain"])
         rows.append((label, measure(out), seconds))
     print(f"{'case':26s} {'particles':>9s} {'L/L0':>7s} {'foot [mm]':>9s} {'max eps_p':>9s} {'energy':>8s} "
           f"{'disorder':>8s} {'wall [s]':>8s}")

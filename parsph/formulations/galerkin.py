@@ -397,12 +397,12 @@ def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, stat
     V^0 P F^rT = V^r P^r [V eq. 14]. In the total-Lagrangian case fs and F are one array."""
     P = np.empty((dim, dim))
     work = np.empty((update.WORK, 3, 3))
+    undamaged = state[:, :0]  # damage is computed at particles only (config)
     first_bad = -1
     for q in range(lo, hi):
         gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-        undamaged = state[:, :0]  # damage is computed at particles only (config)
-        if stress_at(dim, law, updated, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P, work, F, VP, J,
-                     psi) \
-                and first_bad < 0:
+        bad = stress_at(dim, law, updated, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P, work, F,
+                        VP, J, psi)
+        if bad and first_bad < 0:
             first_bad = q
     return first_bad
