@@ -104,6 +104,10 @@ def reference_pairs(
     row = pairs.row_of_pair()
     dx = positions[pairs.idx] - positions[row]
     dist = np.sqrt(np.einsum("pa,pa->p", dx, dx))
+    if len(dist) and not np.isfinite(dist).all():
+        p = int(np.flatnonzero(~np.isfinite(dist))[0])
+        raise InputError(f"particles {int(gid[row[p]])} and {int(gid[pairs.idx[p]])} have no finite distance "
+                         f"(a position is not a number)")
     if len(dist) and not dist.min() > 0.0:
         p = int(np.argmin(dist))
         where = ", ".join(f"{c:.6g}" for c in positions[row[p]])
