@@ -4,12 +4,12 @@ While the largest principal logarithmic strain of a point exceeds the failure st
 damage grows at  d(D^(1/3))/dt = 0.4 c0 / h  (c0 the reference P-wave speed, h the kernel
 support radius of the particle; [G] leaves the strain measure and the sound speed open),
 irreversibly, capped at 1. The Cauchy stress of the law is scaled in its principal axes:
-positive principal stresses by (1 - D), negative ones are kept, so a failed point (D = 1)
-carries compression but no tension. Its pairs stay; its hourglass modulus is (1 - D) E
+positive principal stresses by (1 - D), negative ones are kept: a damaged point still
+carries compression. Its pairs stay; its hourglass modulus is (1 - D) E
 (formulations.nodal), so the penalty does not hold a crack shut.
 
-A fully failed point carries no stress at all (not even compression): it would otherwise
-be crushed by its neighbours into an unstable state; its law is no longer evaluated.
+A fully failed point (D = 1) carries no stress at all, not even compression (kept, it was
+crushed by its neighbours until the stable step collapsed); its law is no longer evaluated.
 
 The degraded stress derives from no energy, so the loop keeps the work each point has
 taken, W = int P : dF (trapezoidal rule, per unit reference volume), and reports the
