@@ -149,14 +149,14 @@ def test_notched_strip_breaks_across_the_notch_and_the_energy_balance_closes():
 
 @pytest.mark.mpi
 def test_damage_is_the_same_on_three_ranks_and_across_a_restart(tmp_path):
+    """One rank straight through against two ranks to step 270 (the crack growing) and three
+    after the restart: the same bit for bit."""
     path = tmp_path / "strip.toml"
     path.write_text(STRIP)
-    one, three, split = tmp_path / "one", tmp_path / "three", tmp_path / "split"
-    for out, ranks, extra in ((one, 1, []), (three, 3, []),
-                              (split, 2, ["--set", "time.max_steps=270", "--set", "output.checkpoint_every=270"])):
+    one, split = tmp_path / "one", tmp_path / "split"
+    for out, ranks, extra in ((one, 1, []),
+                              (split, 2, ["--set", "time.max_steps=270", "--set", "output.checkpoint_every=270"]),
+                              (split, 3, ["--restart", "latest"])):
         proc = parsph(["run", path, "--out", out, "--quiet", *extra], ranks=ranks)
         assert proc.returncode == 0, proc.stderr
-    proc = parsph(["run", path, "--out", split, "--quiet", "--restart", "latest"], ranks=3)
-    assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(one, three)
     assert_identical_outputs(one, split)
