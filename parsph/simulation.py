@@ -66,7 +66,7 @@ class Body:
         self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
         self.density = spec["material"]["density"]
         kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
-        self.formulation = kind(spec["formulation"], dim, self.law.law_id)
+        self.formulation = kind(spec["formulation"], dim, self.law.law_id, damaged=self.failure_strain is not None)
         self.lo = self.hi = 0
         self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
         self.stages = []

@@ -207,7 +207,7 @@ class GalerkinFormulation:
     weighted_hessian = True
     update_strain = 0
 
-    def __init__(self, options: dict, dim: int, law: int):
+    def __init__(self, options: dict, dim: int, law: int, damaged: bool = False):  # damage: particle methods only
         self.type = options["type"]
         self.shape = "kbm" if self.type == "kbm" else "mls"
         self.points = integration_set(options)  # the other set, if any
@@ -401,8 +401,8 @@ def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, stat
     first_bad = -1
     for q in range(lo, hi):
         gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-        bad = stress_at(dim, law, updated, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P, work, F,
-                        VP, J, psi)
+        bad = stress_at(dim, law, updated, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
+                        work, F, VP, J, psi)
         if bad and first_bad < 0:
             first_bad = q
     return first_bad

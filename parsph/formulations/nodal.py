@@ -47,7 +47,7 @@ register(*UPDATED_FIELDS)
 class NodalFormulation:
     """One body's formulation: its options and compiled stages."""
 
-    def __init__(self, options: dict, dim: int, law: int):
+    def __init__(self, options: dict, dim: int, law: int, damaged: bool = False):
         self.type = options["type"]
         self.eulerian = options.get("kernel") == "eulerian"
         self.updated = self.type == "ulsph" or self.eulerian
@@ -61,7 +61,7 @@ class NodalFormulation:
             (options["update_every"], options["update_strain"])
         force = "rlm" if self.type == "rlm" else options["force_form"]
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
-            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, self.updated, self.eta > 0)
+            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, self.updated, self.eta > 0, damaged)
 
     @property
     def pair_options(self) -> PairOptions:

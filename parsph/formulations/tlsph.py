@@ -74,10 +74,11 @@ VARIATIONAL_SCALE = 0.2
 
 @functools.lru_cache(maxsize=None)
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated: bool = False,
-                   hessian: bool = False):
+                   hessian: bool = False, damaged: bool = False):
     """(gradient, kinematics_stress, hessian_transpose, forces) for one body's switches:
     dimension, material law (materials.update), force row, hourglass form, updated
-    reference, Hessian stabilisation. Each stage works on the owned rows lo..hi-1.
+    reference, Hessian stabilisation, tensile damage (materials.damage: only the stages of a
+    damaged body compile it). Each stage works on the owned rows lo..hi-1.
 
     The switches are closure constants; the stage bodies are inlined, so branches on them
     are folded away by the compiler. `gradient` and `hessian_transpose` are the extra
@@ -92,14 +93,14 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         _gradient(dim, lo, hi, ptr, idx, g, d, f)
 
     @njit(cache=True)
-    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damaged,
-                          damaged_trial, f, fs, F, Fr, VP, J, psi, hg_psi):
+    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
+                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
-        new material and damage state (trial, damaged_trial) and (variational form)
+        new material and damage state (trial, damage_trial) and (variational form)
         hourglass penalty hg_psi; returns the first inverted particle or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, gh, dx, hgc, d,
-                           volume, youngs, c, state, trial, damaged, damaged_trial, f, fs, F, Fr, VP, J, psi,
+        return _kinematics(dim, law, hourglass, updated, hessian, damaged, lo, hi, ptr, idx, g, q, gh, dx, hgc, d,
+                           volume, youngs, c, state, trial, (damage_state, damage_trial), f, fs, F, Fr, VP, J, psi,
                            hg_psi)
 
     @njit(cache=True)
@@ -143,10 +144,11 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def stress_at(dim, law, updated, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F, VP, J, psi):
+def stress_at(dim, law, updated, with_damage, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F, VP,
+              J, psi):
     """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
     updated reference [V §3.1], the material update (new state in trial[i]), its damage
-    (materials.damage, if `damaged` has columns), J, psi and VP[i] = w P, or w P F^rT =
+    (materials.damage, if with_damage), J, psi and VP[i] = w P, or w P F^rT =
     V^r P^r [V eq. 14]. Returns whether the point is inverted or its stress not finite
     (never for a failed point, which carries no stress)."""
     if updated:
@@ -156,12 +158,14 @@ def stress_at(dim, law, updated, i, fs, Fr, w, c, state, trial, damaged, damaged
                 for k in range(dim):
                     s += fs[i, a, k] * Fr[i, k, b]
                 F[i, a, b] = s
-    broken = damaged.shape[1] > 0 and damaged[i, damage.DAMAGE] >= 1.0
+    broken = False
+    if with_damage:
+        broken = damaged[i, damage.DAMAGE] >= 1.0
     if broken:  # failed: no stress, the law is not evaluated
         e = damage.failed(F[i], dim, damaged, damaged_trial, i, P)
     else:
         e = update.update(law, F[i], dim, c, state, trial, i, P, work)
-        if damaged.shape[1] > 0:
+        if with_damage:
             damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
     J[i] = det(F[i], dim)
     psi[i] = e
@@ -184,8 +188,9 @@ def _gradient(dim, lo, hi, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume,
-                youngs, c, state, trial, damaged, damaged_trial, f, fs, F, Fr, VP, J, psi, hg_psi):
+def _kinematics(dim, law, hourglass, updated, hessian, with_damage, lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume,
+                youngs, c, state, trial, damage_pair, f, fs, F, Fr, VP, J, psi, hg_psi):
+    damaged, damaged_trial = damage_pair
     P = np.empty((dim, dim))
     work = np.empty((update.WORK, 3, 3))
     err = np.empty(dim)
@@ -204,8 +209,8 @@ def _kinematics(dim, law, hourglass, updated, hessian, lo, hi, ptr, idx, g, q, g
                         fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
         else:
             gradient_row(dim, i, i, ptr, idx, g, d, fs)
-        if stress_at(dim, law, updated, i, fs, Fr, volume[i], c, state, trial, damaged, damaged_trial, P, work, F,
-                     VP, J, psi) \
+        if stress_at(dim, law, updated, with_damage, i, fs, Fr, volume[i], c, state, trial, damaged, damaged_trial, P,
+                     work, F, VP, J, psi) \
                 and first_bad < 0:
             first_bad = i
         if hourglass == HOURGLASS_VARIATIONAL:
