@@ -15,6 +15,7 @@ import operator
 import json
 import math
 import os
+import re
 import stat
 import sys
 import tomllib
@@ -23,7 +24,7 @@ from typing import Any, Callable
 
 from parsph import expressions, quantities
 from parsph.errors import InputError
-from parsph.materials import LAW_KEYS, LAWS
+from parsph.materials import LAW_KEYS, LAWS, constants
 
 REQUIRED = object()
 
@@ -151,9 +152,10 @@ SECTIONS: dict[str, dict[str, Key]] = {
                             "as [R §9.3]), sooner when a particle has moved half the skin; the shape "
                             "functions are recomputed at every step (kbm, efg: their point relations too, "
                             "from this rank's points); the result is that of a search at every step"),
-        "skin": Key("float", None, non_negative,
+        "skin": Key("float", None, in_range(0.0, 2.0),
                     "eulerian: how far beyond the support neighbours are kept between searches, as a "
-                    "fraction of the support (default 0.25)"),
+                    "fraction of the support (default 0.25; at most 2: the lists hold (1 + skin)^d "
+                    "times the pairs)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
         "viscosity": Key("float", 0.0, non_negative,
@@ -415,6 +417,16 @@ def _validate_material(path: str, mat: dict) -> None:
         if k not in allowed and mat[k] is not None:
             takes = ", ".join(allowed[:-1]) + " and " + allowed[-1]
             raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {takes})")
+    given = ", ".join(f"{k} = {mat[k]:g}" for k in ("density",) + law.takes)
+    try:
+        moduli = constants(mat)
+        speed = moduli.wave_speed
+    except (ArithmeticError, ValueError):
+        moduli, speed = None, math.nan
+    if moduli is None or not (all(math.isfinite(c) for c in moduli.values) and math.isfinite(moduli.youngs)
+                              and math.isfinite(speed) and speed > 0.0):
+        raise InputError(f"{path}: the moduli or the P-wave speed sqrt((lambda + 2 mu) / density) = {speed:g} m/s "
+                         f"are not finite positive numbers in double precision ({given})")
     if law.name == "j2_plasticity" and mat["hardening_modulus"] is not None:
         mu = mat["youngs_modulus"] / (2.0 * (1.0 + mat["poisson_ratio"]))
         if not 3.0 * mu + mat["hardening_modulus"] > 0.0:
@@ -546,6 +558,12 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
     for i, t in enumerate(_array("probes", raw.get("probes"))):
         probe = _table(f"probes[{i}]", t, PROBE_KEYS, dim)
         check_group(f"probes[{i}].group", probe["group"])
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", probe["name"]):
+            raise InputError(f"probes[{i}].name {probe['name']!r} must be a plain name: letters, digits and "
+                             "underscores, not starting with a digit (it names a series of history.h5)")
+        if quantities.is_history_series(probe["name"]):
+            raise InputError(f"probes[{i}].name '{probe['name']}' is the name of one of the history's own series "
+                             f"({', '.join(quantities.HISTORY)}, momentum_x, wall0_force_x, ...): choose another")
         if probe["name"] in names:
             raise InputError(f"probes[{i}].name '{probe['name']}' is used twice")
         names.add(probe["name"])

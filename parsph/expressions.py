@@ -5,8 +5,10 @@ An expression is parsed once into a syntax tree and checked: numbers, the scene'
 parameters, the reference coordinates x, y, z (as many as the scene has dimensions), the
 operators + - * / ** and the functions of FUNCTIONS; nothing else is accepted (no other
 names, attributes, subscripts or calls), so evaluating a scene file runs no code of its
-own. It is evaluated with numpy on the positions of a rank's particles; a value that is not
-finite is refused, naming the particle.
+own. It is evaluated in IEEE double precision (numbers and parameters as numpy floats, so a
+power overflows to inf at once instead of being raised exactly as a Python integer) on the
+positions of a rank's particles; a value that is not a finite real number (an overflow, a
+root of a negative number) is refused, naming the particle.
 """
 
 from __future__ import annotations
@@ -77,11 +79,12 @@ class Field:
     def __call__(self, X: np.ndarray, gid: np.ndarray) -> np.ndarray:
         """Values at the reference positions X (rows); raises InputError naming the first
         particle (global id `gid`) where the value is not finite."""
-        names = dict(self.parameters, **{c: X[:, k] for k, c in enumerate(self.coordinates)})
+        names = {name: np.float64(value) for name, value in self.parameters.items()}
+        names.update({c: X[:, k] for k, c in enumerate(self.coordinates)})
 
         def ev(node):
             if isinstance(node, ast.Constant):
-                return float(node.value)
+                return np.float64(node.value)
             if isinstance(node, ast.Name):
                 return names[node.id]
             if isinstance(node, ast.BinOp):
@@ -99,5 +102,6 @@ class Field:
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
             where = ", ".join(f"{c:.6g}" for c in X[k])
-            raise InputError(f"{self.path} = '{self.text}' is {value[k]} at particle {int(gid[k])} ({where})")
+            raise InputError(f"{self.path} = '{self.text}' is {value[k]} at particle {int(gid[k])} ({where}): "
+                             "not a finite real number")
         return value

@@ -80,7 +80,12 @@ HISTORY = {
     "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
 HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),
-                    (r".+_force_[xyz]", "N"))
+                    (r"(wall|tool)[0-9]+_force_[xyz]", "N"))
+
+
+def is_history_series(name: str) -> bool:
+    """Is `name` one of the history's own series (a probe of that name would replace it)?"""
+    return bool(history_units(name))
 
 
 def history_units(name: str) -> str:

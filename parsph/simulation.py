@@ -341,8 +341,18 @@ class Simulation:
         if not self.hourglass or not len(ref.idx):
             return np.zeros(n)
         rows = np.repeat(np.arange(n), np.diff(ref.ptr))
-        k = ref.hgc * (self.youngs[rows] + self.youngs[ref.idx])
-        return 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
+        with np.errstate(over="ignore", invalid="ignore"):
+            k = ref.hgc * (self.youngs[rows] + self.youngs[ref.idx])
+            out = 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
+        with collective(self.comm):
+            bad = np.flatnonzero(~np.isfinite(out))
+            if len(bad):
+                i = bad[np.argmin(self.gid[bad])]
+                alpha = self.bodies[self.body[i]].formulation.alpha
+                raise InputError(f"formulation.hourglass = {alpha:g}: the hourglass stiffness of particle "
+                                 f"{self.gid[i]} over its mass, {out[i]:g} 1/s^2, overflows the range of double "
+                                 "precision ([G] recommends 50)")
+        return out
 
     def stable_time_step(self) -> tuple:
         """(size of the next step, largest incremental log strain): time.dt if fixed, else

@@ -56,7 +56,7 @@ def test_anything_but_arithmetic_of_position_and_parameters_is_refused(expressio
 
 @pytest.mark.parametrize("expression, message", [
     ('["log(x - 0.5)", "0"]', r"initial\[0\].expression\[0\] = 'log\(x - 0.5\)' is nan at particle 0"),
-    ('["10.0**400 * x", "0"]', "cannot be evaluated"),
+    ('["10.0**400 * x", "0"]', "is inf at particle 0"),
     ('["1/(x - x)", "0"]', "is inf at particle 0"),
 ])
 @pytest.mark.parametrize("ranks", [1, 2])
@@ -64,7 +64,7 @@ def test_a_value_that_is_not_finite_ends_the_run_with_exit_2_naming_the_particle
                                                                                     tmp_path):
     path = tmp_path / "block.toml"
     path.write_text(scene_text(expression))
-    proc = parsph(["run", path, "--out", tmp_path / "out", "--quiet"], ranks=ranks, timeout=120)
+    proc = parsph(["run", path, "--out", tmp_path / "out", "--quiet"], ranks=ranks)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert re.search(message, proc.stderr), proc.stderr
