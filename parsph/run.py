@@ -100,16 +100,42 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
         previous = output_dir.check_output(out_dir, overwrite)
         return scene, out_dir, previous, build_local(scene, COMM), None
     data = checkpoint.load(restart, out_dir, COMM)
+    previous = []
     with collective():
         checkpoint.check_compatible(data["scene"], scene, data["path"])
         if COMM.rank == 0:
-            check_resumable(scene, out_dir)
+            previous = other_run(out_dir, data["scene"], data["path"], overwrite)
+            if not previous:
+                check_resumable(scene, out_dir)
     fields = data.pop("fields")
     position = "Xr" if "Xr" in fields else "X"
     local = localize(fields, data.pop("sets"), position, COMM)
     local.offsets = None if data["offsets"] is None else np.array(data["offsets"], np.int64)
     say(f"parsph: restarting from {data['path']} at step {data['clock']['step']}, t = {data['clock']['t']:.6g} s")
-    return scene, out_dir, [], local, data
+    return scene, out_dir, previous, local, data
+
+
+def other_run(out_dir: str, checkpoint_scene: dict, checkpoint_path: str, overwrite: bool) -> list:
+    """Refuse a restart into an output directory that holds a run of another scene (the
+    restart would cut and mix its history and remove its snapshots): [] if `out_dir` holds
+    nothing or the checkpointed run; with --overwrite, the other run's files to remove
+    (once the restart has been set up)."""
+    try:
+        held = output_dir.held_scene(out_dir)
+        changed = [] if held is None else checkpoint.physics_changes(held, checkpoint_scene)
+    except InputError:
+        if not overwrite:
+            raise
+        changed = ["an unreadable scene"]
+    if not changed:
+        return []
+    if not overwrite:
+        shown = ", ".join(changed[:6]) + (", ..." if len(changed) > 6 else "")
+        raise InputError(f"{out_dir} holds a run of another scene than checkpoint {checkpoint_path} (they differ "
+                         f"in {shown}): continuing into it would cut and mix that run's history and remove its "
+                         "snapshots; restart into another --out, or pass --overwrite to replace that run")
+    keep = os.path.realpath(checkpoint_path)
+    return [p for p in output_dir.run_files(out_dir) if os.path.realpath(p) != keep]
 
 
 def check_resumable(scene: dict, out_dir: str) -> None:
@@ -152,8 +178,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     sim = Simulation(scene, local, COMM, restart=data)
     del local
     setup_seconds = time.perf_counter() - start
-    if data is None:
-        output_dir.claim_output(out_dir, previous)
+    output_dir.claim_output(out_dir, previous)
     say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 

@@ -127,6 +127,28 @@ def test_restart_to_an_earlier_end_is_refused_and_keeps_the_output(bar, tmp_path
         assert files_of(out) == before
 
 
+def test_a_restart_into_the_output_of_another_scene_is_refused_unless_overwrite(bar, tmp_path):
+    """Scene B's checkpoint continued with --out at scene A's finished run must neither cut
+    A's history nor remove A's snapshots and checkpoints; with --overwrite B replaces A."""
+    other = tmp_path / "other.toml"
+    other.write_text(BAR.replace("density = 7850.0", "density = 2700.0"))
+    a, b = tmp_path / "a", tmp_path / "b"
+    options = ["--set", "output.checkpoint_every=20", "--set", "output.snapshot_interval=2e-4"]
+    run_ok([bar, "--out", a, "--set", "time.max_steps=60", *options])
+    run_ok([other, "--out", b, "--set", "time.max_steps=40", *options])
+    before = files_of(a)
+    checkpoint = b / "checkpoints" / "step_00000020.h5"
+    proc = parsph(["run", other, "--out", a, "--quiet", "--restart", checkpoint, "--set", "time.max_steps=80"])
+    refused(proc, f"{a} holds a run of another scene than checkpoint {checkpoint}", "material.density",
+            "--overwrite")
+    assert files_of(a) == before
+    run_ok([other, "--out", a, "--overwrite", "--restart", checkpoint, "--set", "time.max_steps=40", *options])
+    assert sorted(p.name for p in (a / "checkpoints").glob("*.h5")) == ["step_00000040.h5"]
+    steps = all_series(a / "history.h5")["step"]
+    assert steps[0] > 20 and steps[-1] == 40 and np.all(np.diff(steps) > 0)
+    assert all_series(a / "history.h5")["tip_displacement"][-1] == all_series(b / "history.h5")["tip_displacement"][-1]
+
+
 @pytest.mark.parametrize("damaged", ["history.h5", "snapshots.h5"])
 def test_restart_with_a_damaged_history_or_snapshot_file_is_refused(bar, tmp_path, damaged):
     out = tmp_path / "out"

@@ -291,10 +291,16 @@ def differing_keys(old: dict, new: dict, prefix: str = "") -> list:
     return keys
 
 
+def physics_changes(old_scene: dict, scene: dict) -> list:
+    """The keys in which two resolved scenes differ beyond what a restart may change
+    (RESTART_FREE): an empty list if one run can continue the other."""
+    return [k for k in differing_keys(old_scene, scene)
+            if not any(k == free or (free.endswith(".") and k.startswith(free)) for free in RESTART_FREE)]
+
+
 def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
     """Refuse a restart whose scene changes the physics of the checkpointed run."""
-    changed = [k for k in differing_keys(old_scene, scene)
-               if not any(k == free or (free.endswith(".") and k.startswith(free)) for free in RESTART_FREE)]
+    changed = physics_changes(old_scene, scene)
     if changed:
         raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
                          "only time.end, time.max_steps, time.wall_limit and output settings may change "

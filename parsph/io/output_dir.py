@@ -11,9 +11,12 @@ from __future__ import annotations
 import errno
 import fcntl
 import glob
+import json
 import os
 import shutil
 import socket
+
+import h5py
 
 from parsph.errors import InputError, ParsphError
 from parsph.parallel.runtime import COMM, collective, say
@@ -68,14 +71,40 @@ def lock(out_dir: str) -> None:
             _lock_fd = fd
 
 
+def run_files(out_dir: str) -> list:
+    """The files of a run in `out_dir`: history, snapshots, scene and checkpoints."""
+    present = [os.path.join(out_dir, f) for f in RUN_FILES if os.path.exists(os.path.join(out_dir, f))]
+    return present + _checkpoint_files(out_dir)
+
+
+def held_scene(out_dir: str) -> dict | None:
+    """The resolved scene of the run `out_dir` holds (its scene.json, else the attribute of
+    its history), None if it holds no history, snapshots or scene; InputError if neither
+    can be read."""
+    for name in ("scene.json", "history.h5", "snapshots.h5"):
+        path = os.path.join(out_dir, name)
+        if not os.path.exists(path):
+            continue
+        try:
+            if name == "scene.json":
+                with open(path) as fh:
+                    return json.load(fh)
+            with h5py.File(path, "r") as f:
+                return json.loads(f.attrs["scene"])
+        except Exception as exc:  # noqa: BLE001 - any damage: name the file
+            raise InputError(f"cannot tell which run {out_dir} holds: {path} cannot be read "
+                             f"({type(exc).__name__}: {exc}); restart into another --out, or pass "
+                             "--overwrite to replace that run") from None
+    return None
+
+
 def check_output(out_dir: str, overwrite: bool) -> list:
     """Collective, changes nothing: the previous run's files in `out_dir` (to be replaced by
     a new run: only with --overwrite)."""
     present = []
     with collective():
         if COMM.rank == 0:
-            present = [os.path.join(out_dir, f) for f in RUN_FILES if os.path.exists(os.path.join(out_dir, f))]
-            present += _checkpoint_files(out_dir)
+            present = run_files(out_dir)
             if present and not overwrite:
                 shown = sorted({os.path.relpath(p, out_dir).split(os.sep)[0] for p in present})
                 raise InputError(
