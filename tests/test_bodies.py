@@ -4,14 +4,12 @@ kernel pairs between bodies, energies per body and in total, the same on any ran
 from __future__ import annotations
 
 import copy
-import subprocess
-import sys
 import tomllib
 
 import numpy as np
 import pytest
 
-from conftest import ROOT, RUNS
+from conftest import RUNS, assert_same_on_ranks
 from parsph import config
 from parsph.build import build_local
 from parsph.errors import InputError
@@ -93,16 +91,11 @@ def test_bad_bodies_are_refused_naming_the_key(change, message):
 
 
 @pytest.mark.mpi
-def test_two_bodies_on_one_and_two_ranks_bit_for_bit(tmp_path):
-    from conftest import parsph
-
-    outs = []
-    for ranks in (1, 2):
-        out = tmp_path / f"r{ranks}"
-        proc = parsph(["run", RUNS / "two_blocks.toml", "--out", out, "--quiet", "--set", "time.max_steps=100"],
-                      ranks=ranks)
-        assert proc.returncode == 0, proc.stdout + proc.stderr
-        outs.append(out)
-    compare = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *outs],
-                             capture_output=True, text=True, cwd=ROOT)
-    assert compare.returncode == 0, compare.stdout
+@pytest.mark.parametrize("rubber", [[], ["--set", 'bodies.1.formulation.type="efg"',
+                                         "--set", 'bodies.1.formulation.integration="cells"']],
+                         ids=["sph", "efg-cells"])
+def test_two_bodies_on_one_and_two_ranks_bit_for_bit(rubber, tmp_path):
+    """Also with the second body's Gauss points (EFG with cells), which a rank holding none
+    of them must handle."""
+    assert_same_on_ranks(RUNS / "two_blocks.toml", ["--set", "time.max_steps=100", *rubber], tmp_path,
+                         ranks=(1, 2))

@@ -147,7 +147,7 @@ def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, 
     dM = np.zeros((n, dim, m, m))
     np.add.at(dM, row, grad[:, :, None, None] * np.einsum("pa,pb->pab", p, p)[:, None])
     Minv = _inverse(M, active, counts, x_rows, gid_rows, "moment matrix M", what)
-    data = np.concatenate([scale[:, None], Minv.reshape(n, -1), dM.reshape(n, -1)], axis=1)
+    data = np.concatenate([scale[:, None], Minv.reshape(n, m * m), dM.reshape(n, dim * m * m)], axis=1)
     phi = np.einsum("pa,pa->p", Minv[row, 0], p) * w
     return _mls_gradients(p, w, grad, data[row], dim), data, phi
 
