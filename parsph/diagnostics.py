@@ -124,3 +124,39 @@ def check_particle_ids(state) -> None:
     if (count, total, squares) != expected:
         raise ParsphError(f"particles lost or duplicated at step {state.step_count}: ranks own {count} "
                           f"particles, expected {n} (id sums {total}, {squares} vs {expected[1:]})")
+
+
+def check_finite(values: dict, state) -> None:
+    """Stop the run (collective: `values` are the same global row on every rank) if a
+    history value about to be written is not finite, naming the series, the step and the
+    particle where the state first leaves the range of double precision: the lowest global
+    id whose position, velocity, force or kinetic energy is not finite."""
+    from parsph.errors import ParsphError
+
+    bad = [f"{name} = {value}" for name, value in values.items() if not math.isfinite(value)]
+    if not bad:
+        return
+    n = state.n_owned
+    v = state.v[:n]
+    with np.errstate(over="ignore", invalid="ignore"):
+        kinetic = 0.5 * state.mass[:n] * np.einsum("na,na->n", v, v)
+        columns = {"position": state.X[:n] + state.u[:n], "velocity": v, "force": state.force[:n],
+                   "kinetic energy": kinetic[:, None]}
+    mine = []
+    for what, column in columns.items():
+        rows = np.flatnonzero(~np.isfinite(column).all(axis=1))
+        if len(rows):
+            k = rows[np.argmin(state.gid[rows])]
+            mine.append((int(state.gid[k]), what, tuple(column[k].tolist())))
+    found = [c for part in state.comm.allgather(mine) for c in part]
+    where = ""
+    if found:
+        gid, what, value = min(found)
+        where = f"; particle {gid} is the first whose {what} is not finite ({', '.join(f'{c:.3g}' for c in value)})"
+    error = ParsphError(
+        f"the history row at step {state.step_count}, t = {state.t:.6g} s is not finite: "
+        f"{', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}{where}; the run is stopped (the output written "
+        "so far is intact): check the initial conditions, loads and material constants for values beyond the "
+        "range of double precision (1.8e308)")
+    error.agreed = True  # the row is the same global reduction on every rank
+    raise error

@@ -383,6 +383,12 @@ class Simulation:
         reduced = np.array([-dt, strain])
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
+        if -reduced[0] == math.inf:
+            error = ParsphError(f"no particle sets the stable time step at step {self.step_count}, t = {self.t:.6g} s: "
+                                "every particle has failed completely (damage 1) and carries no stress; the run "
+                                "is stopped, as nothing is left to integrate")
+            error.agreed = True  # the same reduction on every rank
+            raise error
         if not -reduced[0] > self._floor:
             mine = [] if smallest < 0 else [(dt, int(self.gid[smallest]),
                                              tuple((self.X[smallest] + self.u[smallest]).tolist()))]

@@ -6,7 +6,9 @@ and the run is the same bit for bit on 1 and 3 ranks and across a restart."""
 from __future__ import annotations
 
 import math
+import re
 
+import h5py
 import numpy as np
 import pytest
 
@@ -160,3 +162,21 @@ def test_damage_is_the_same_on_three_ranks_and_across_a_restart(tmp_path):
         proc = parsph(["run", path, "--out", out, "--quiet", *extra], ranks=ranks)
         assert proc.returncode == 0, proc.stderr
     assert_identical_outputs(one, split)
+
+
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
+def test_a_body_whose_every_particle_has_failed_stops_with_a_message(ranks, tmp_path):
+    """Every particle stretched beyond a failure strain of 1e-12 fails within a few
+    microseconds; then no particle bounds the stable step: the run stops with exit 1 and a
+    message instead of writing dt = inf, and the history holds the finite rows before."""
+    path = tmp_path / "strip.toml"
+    path.write_text(STRIP.replace("failure_strain = 0.03", "failure_strain = 1.0e-12")
+                    .replace('[[bc]]\ntype = "fixed"\ngroup = "held"\n', "")
+                    + '[[initial]]\ntype = "displacement_gradient"\ngroup = "all"\n'
+                      "gradient = [[1.0e-3, 0.0], [0.0, 1.0e-3]]\n")
+    proc = parsph(["run", path, "--out", tmp_path / "out", "--quiet"], ranks=ranks)
+    err = proc.stderr
+    assert proc.returncode == 1 and err.count("parsph: error") == 1 and "Traceback" not in err, err
+    assert re.search(r"no particle sets the stable time step at step \d+, .* every particle has failed", err), err
+    with h5py.File(tmp_path / "out" / "history.h5", "r") as f:
+        assert len(f["dt"]) > 1 and np.isfinite(f["dt"][()]).all()

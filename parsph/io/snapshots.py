@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from parsph import quantities
-from parsph.errors import InputError
+from parsph.errors import InputError, ParsphError
 from parsph.io.h5 import ParticleFile
 from parsph.parallel.runtime import collective
 
@@ -81,14 +81,24 @@ class SnapshotWriter:
         return sim.decomp.total * per_particle + first + 1024 * (len(fields) + 2)
 
     def write(self, sim, fields: list) -> None:
-        """Collective: one snapshot of the owned particles' `fields`."""
+        """Collective: one snapshot of the owned particles' `fields`; a value that is not
+        finite stops the run before anything of the snapshot is written, naming the field,
+        the particle and the step."""
         n = sim.n_owned
-        sel = np.arange(n)
         gid = sim.gid[:n]
         total = sim.decomp.total
         group = f"step_{sim.step_count:08d}"
-        shapes = {}
         first = not self.times
+        with collective(self.comm):
+            values = {name: self._values(sim, name) for name in fields}
+            for name, data in values.items():
+                bad = np.flatnonzero(~np.isfinite(data).all(axis=tuple(range(1, data.ndim))))
+                if len(bad):
+                    k = bad[np.argmin(gid[bad])]
+                    raise ParsphError(f"the snapshot at step {sim.step_count}, t = {sim.t:.6g} s: {name} of particle "
+                                      f"{gid[k]} is not finite ({data[k]}); the run is stopped (the output written "
+                                      "so far is intact)")
+        shapes = {name: data.shape[1:] for name, data in values.items()}
         with collective(self.comm):
             with ParticleFile(self.path, "a", self.comm) as out:
                 if first:  # explicit Polyvertex connectivity 0..n-1, for readers that need it
@@ -98,17 +108,8 @@ class SnapshotWriter:
                     grp.attrs["time"] = sim.t
                     grp.attrs["step"] = sim.step_count
                 out.write_rows(f"{group}/gid", gid, gid, total)
-                for name in fields:
-                    if name == "rank":
-                        data = np.full(n, self.comm.rank, np.int32)
-                    elif name == "reference_position":
-                        data = sim.X[:n]
-                    else:
-                        data = sim.quantity(name, sel)
-                    if name in ("position", "reference_position") and data.shape[1] < 3:
-                        data = np.pad(data, ((0, 0), (0, 3 - data.shape[1])))
+                for name, data in values.items():
                     out.write_rows(f"{group}/{name}", gid, data, total)
-                    shapes[name] = data.shape[1:]
         self.times.append(sim.t)
         if self.comm.rank == 0:
             entry = (sim.t, group, total, shapes)
@@ -118,6 +119,16 @@ class SnapshotWriter:
                 text = self._grid(*entry)
                 fh.write(text + FOOTER)
             self.end += len(text)
+
+    def _values(self, sim, name: str) -> np.ndarray:
+        """This rank's rows of a snapshot field (positions padded to 3D)."""
+        n = sim.n_owned
+        if name == "rank":
+            return np.full(n, self.comm.rank, np.int32)
+        data = sim.X[:n] if name == "reference_position" else sim.quantity(name, np.arange(n))
+        if name in ("position", "reference_position") and data.shape[1] < 3:
+            data = np.pad(data, ((0, 0), (0, 3 - data.shape[1])))
+        return data
 
     def _grid(self, t: float, group: str, n: int, shapes: dict) -> str:
         """The XDMF grid of one snapshot."""
