@@ -54,6 +54,15 @@ TOTALS = ("hourglass_work",  # absorbed by the "paper" hourglass forces
           "external_work")
 
 
+def _breakdown(J: float) -> str:
+    """What went wrong at a point whose stress evaluation failed, from its volume ratio J."""
+    if J <= 0.0:
+        return f"is inverted (J = {J:.4g})"
+    if not math.isfinite(J):
+        return f"has a deformation that is not finite (J = {J})"
+    return f"has a stress that is not finite (J = {J:.4g})"
+
+
 class Body:
     """One body of the scene: its particles' global ids first..last-1, its material law and
     constants, its formulation; lo..hi-1 are its owned rows on this rank."""
@@ -302,9 +311,8 @@ class Simulation:
         where = ", ".join(f"{c:.6g}" for c in A["X"][q])
         what = points[:-1].replace("_", " ")
         return ParsphError(
-            f"{what} {int(A['gid'][q])} at reference ({where}) is inverted or its stress is not finite "
-            f"(J = {A['J'][q]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
-            f"unstable: {self._advice()}")
+            f"{what} {int(A['gid'][q])} at reference ({where}) {_breakdown(A['J'][q])} at step "
+            f"{self.step_count + 1}, t = {self.t:.6g}; the run is unstable: {self._advice()}")
 
     def point_set(self, name: str) -> PointSet:
         return self.particles if name == "particles" else self.sets[name]
@@ -436,7 +444,12 @@ class Simulation:
                 seconds["halo"] += clock() - t0
             for stage in phase:
                 t0 = clock()
-                stage.run()
+                try:
+                    stage.run()
+                except ArithmeticError as exc:  # compiled code divided by zero: the state broke down
+                    raise ParsphError(f"the {stage.name} stage failed ({exc}) at step {self.step_count + 1}, "
+                                      f"t = {self.t:.6g}: particles coincide or are inverted; the run is "
+                                      f"unstable: {self._advice()}") from None
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
@@ -453,9 +466,8 @@ class Simulation:
         """The error for owned particle i, inverted or with a stress that is not finite."""
         where = ", ".join(f"{c:.6g}" for c in self.X[i] + self.u[i])
         return ParsphError(
-            f"particle {int(self.gid[i])} at ({where}) is inverted or its stress is not finite "
-            f"(J = {self.J[i]:.4g}) at step {self.step_count + 1}, t = {self.t:.6g}; the run is "
-            f"unstable: {self._advice()}")
+            f"particle {int(self.gid[i])} at ({where}) {_breakdown(self.J[i])} at step {self.step_count + 1}, "
+            f"t = {self.t:.6g}; the run is unstable: {self._advice()}")
 
     def external_force(self) -> np.ndarray:
         """Body force, tractions and constraint reactions on the owned particles."""

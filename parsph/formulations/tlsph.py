@@ -296,9 +296,10 @@ def _forces(dim, force_form, hourglass, hessian, lo, hi, ptr, idx, g, g_rev, g_s
                         fj += F[j, a, b] * dx[p, b]
                     di += (fi - xij[a]) * xij[a]
                     dj += (fj - xij[a]) * xij[a]
-                c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
-                for a in range(dim):
-                    f_hg[i, a] += c * xij[a]
+                if r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
+                    c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
+                    for a in range(dim):
+                        f_hg[i, a] += c * xij[a]
             elif hourglass == HOURGLASS_VARIATIONAL:
                 # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
                 for a in range(dim):
