@@ -776,20 +776,26 @@ class Simulation:
         tlsph.spacing_ratio(self.n_owned, ref.ptr, ref.idx, x, self.measure, self.F, self.dim, out)
         return out
 
-    def cauchy_stress(self, sel: np.ndarray) -> np.ndarray:
-        """sigma = J^-1 P(F) F^T (in-plane block in 2D), from the material law (with the
-        committed state: the stress of the last evaluation) and its damage."""
-        F = np.ascontiguousarray(self.F[sel])
+    def cauchy_stress(self, sel: np.ndarray, full: bool = False) -> np.ndarray:
+        """sigma = J^-1 P(F) F^T at the owned particles `sel`, from the material law (with the
+        committed state: the stress of the last evaluation) and its damage: the dim x dim
+        block, or (full) all 3 x 3 components, the out-of-plane ones of plane strain (2D) and
+        uniaxial strain (1D) included (the law evaluated with F padded by unit stretches)."""
+        d = 3 if full else self.dim
+        F = np.zeros((len(sel), d, d))
+        F[:, :self.dim, :self.dim] = self.F[sel]
+        for a in range(self.dim, d):
+            F[:, a, a] = 1.0
         P = np.empty_like(F)
         body = self.body[sel]
         for b in self.bodies:
             rows = np.arange(len(sel)) if len(self.bodies) == 1 else np.flatnonzero(body == b.index)
             state = np.ascontiguousarray(self.material_state(b)[0][sel[rows]]) if b.law.state else self.no_state
             part = np.empty_like(F[rows])
-            update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), self.dim, b.constants.values, state,
+            update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), d, b.constants.values, state,
                             state.copy(), part, np.empty(len(rows)))
             if b.failure_strain is not None:
-                damage.degraded_stresses(part, np.ascontiguousarray(F[rows]), self.dim,
+                damage.degraded_stresses(part, np.ascontiguousarray(F[rows]), d,
                                          np.ascontiguousarray(self.damage_state(b)[0][sel[rows]]),
                                          np.empty((update.WORK, 3, 3)))
             P[rows] = part
@@ -805,11 +811,9 @@ class Simulation:
         return out
 
     def von_mises(self, sel: np.ndarray) -> np.ndarray:
-        s = self.cauchy_stress(sel)
-        d = self.dim
-        full = np.zeros((len(sel), 3, 3))
-        full[:, :d, :d] = s
-        dev = full - np.trace(full, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
+        """sqrt(3/2 s:s) of the full Cauchy stress (out-of-plane components included)."""
+        s = self.cauchy_stress(sel, full=True)
+        dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
         return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
 
     def energy_sums(self) -> dict:

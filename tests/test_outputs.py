@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import RUNS, parsph
+from physics import simulation
 
 
 @pytest.fixture(scope="module")
@@ -79,3 +80,94 @@ def test_every_history_series_has_units_and_plots_put_one_unit_per_panel(bar_run
     proc = parsph(["plot", bar_run / "history.h5", *names, "-o", out])
     assert proc.returncode == 0, proc.stderr
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+BLOCK = """
+[scene]
+name = "block"
+dimension = {dim}
+[[geometry.parts]]
+shape = "box"
+lower = {lower}
+upper = {upper}
+spacing = 1.0
+[kernel]
+support = 2.5
+[material]
+model = "{model}"
+density = 1.0
+youngs_modulus = 1.0
+poisson_ratio = 0.3
+{extra}
+[formulation]
+hourglass = 0.0
+[time]
+end = 1.0
+[[initial]]
+type = "displacement_gradient"
+group = "all"
+gradient = {gradient}
+"""
+
+
+def block(dim: int, model: str, strain: float, extra: str = ""):
+    """A 12^dim lattice of unit spacing under the uniform uniaxial strain u_x = strain x."""
+    gradient = np.zeros((dim, dim))
+    gradient[0, 0] = strain
+    return simulation(BLOCK.format(dim=dim, lower=[0.0] * dim, upper=[12.0] * dim, model=model, extra=extra,
+                                   gradient=gradient.tolist()))
+
+
+def centre(sim) -> int:
+    X = sim.X[: sim.n_owned]
+    return int(np.argmin(np.linalg.norm(X - X.mean(axis=0), axis=1)))
+
+
+@pytest.mark.parametrize("dim", [1, 2])
+def test_von_mises_of_plane_and_uniaxial_strain_has_the_out_of_plane_stresses(dim):
+    """Saint Venant-Kirchhoff (E = 1, nu = 0.3) under the uniaxial strain F = diag(1 + e, 1, 1):
+    S_xx = (lambda + 2 mu) E_xx, S_yy = S_zz = lambda E_xx (the held directions carry stress),
+    sigma = F S F^T / J, von Mises |sigma_xx - sigma_yy| (about 2 mu e), in 1D (uniaxial
+    strain) as in 2D (plane strain)."""
+    e = 1e-3
+    lam, mu = 0.3 / (1.3 * 0.4), 1.0 / 2.6
+    E = e + 0.5 * e * e
+    expected = abs((1 + e) * (lam + 2 * mu) * E - lam * E / (1 + e))
+    assert expected == pytest.approx(2 * mu * e, rel=5e-3)
+    sim = block(dim, "saint_venant_kirchhoff", e)
+    i = centre(sim)
+    assert sim.quantity("von_mises", np.array([i]))[0] == pytest.approx(expected, rel=1e-9)
+    full = sim.cauchy_stress(np.array([i]), full=True)[0]
+    assert full[2, 2] == pytest.approx(lam * E / (1 + e), rel=1e-9)
+    assert np.allclose(full[:dim, :dim], sim.quantity("cauchy_stress", np.array([i]))[0], rtol=0, atol=1e-15)
+
+
+def test_von_mises_of_a_yielded_plane_strain_point_is_the_yield_stress():
+    """J2 plasticity in plane strain (sigma_Y = 1e-3 E, no hardening), stretched to 10 times
+    the yield strain: the yielded centre particle's Kirchhoff stress is on the yield surface,
+    so J times the von Mises stress of its Cauchy stress is sigma_Y (with sigma_zz, which the
+    plastic flow out of the plane sets)."""
+    sim = block(2, "j2_plasticity", 1e-2, extra="yield_stress = 1.0e-3")
+    sim.step()  # the committed state is that of a return from the stretched state
+    i = centre(sim)
+    assert sim.quantity("plastic_strain", np.array([i]))[0] > 0
+    assert sim.J[i] * sim.quantity("von_mises", np.array([i]))[0] == pytest.approx(1e-3, rel=1e-6)
+
+
+def test_a_snapshot_with_a_value_that_is_not_finite_is_refused_before_it_is_written(tmp_path):
+    """The writer checks every field of every particle first: the file keeps the snapshots
+    written before, whole, and gains nothing of the refused one."""
+    from mpi4py import MPI
+
+    from parsph.errors import ParsphError
+    from parsph.io.snapshots import SnapshotWriter
+
+    sim = block(2, "saint_venant_kirchhoff", 1e-3)
+    writer = SnapshotWriter(str(tmp_path), "{}", MPI.COMM_SELF)
+    writer.write(sim, ["position", "velocity"])
+    before = (tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()
+    sim.v[7, 1] = np.inf
+    sim.step_count += 1
+    with pytest.raises(ParsphError, match=rf"the snapshot at step 1, .*velocity of particle {sim.gid[7]} is not finite"):
+        writer.write(sim, ["position", "velocity"])
+    assert ((tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()) == before
