@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import ROOT, mpiexec
+from conftest import CEILING, ROOT, mpiexec
 
 PLUGIN = ROOT / "tests" / "mpi" / "field_plugin.py"
 
@@ -65,7 +65,7 @@ def _plugin(args, ranks):
     cmd = [sys.executable, str(PLUGIN), *map(str, args)]
     if ranks > 1:
         cmd = [mpiexec(), "-n", str(ranks), *cmd]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=ROOT)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return proc
 

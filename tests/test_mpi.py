@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import RUNS, parsph
+from conftest import CEILING, RUNS, parsph
 
 FIELDS = '["position","velocity","displacement","J","plastic_strain","rank"]'
 CASES = {
@@ -81,7 +81,7 @@ def test_neighbours_and_gradients_across_rank_boundaries(dim, ranks, cells):
 
     script = ROOT / "tests" / "mpi" / "halo_check.py"
     proc = subprocess.run([mpiexec(), "-n", str(ranks), sys.executable, str(script), str(dim), str(cells)],
-                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+                          capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "OK" in proc.stdout
 
@@ -98,7 +98,7 @@ def test_parallel_build_equals_the_single_process_build(ranks):
 
     script = ROOT / "tests" / "mpi" / "build_check.py"
     proc = subprocess.run([mpiexec(), "-n", str(ranks), sys.executable, str(script)],
-                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+                          capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "OK" in proc.stdout
 

@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import BAR, ROOT, RUNS, mpiexec, parsph
+from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph, wait_for
 
 HISTORY = ["--set", "output.history_every=5", "--set", "output.history_interval=0.0"]
 
@@ -98,9 +98,7 @@ def test_a_second_run_into_a_directory_in_use_is_refused_and_a_killed_run_frees_
     out = tmp_path / "out"
     first = _start([bar, "--out", out, "--set", "time.end=1e3", "--set", "output.checkpoint_every=100"])
     try:
-        deadline = time.monotonic() + 120
-        while not list((out / "checkpoints").glob("step_*.h5")) and time.monotonic() < deadline:
-            time.sleep(0.1)
+        wait_for(lambda: list((out / "checkpoints").glob("step_*.h5")), poll=0.1)
         before = (out / "scene.json").read_bytes()
         for extra in ([], ["--overwrite"], ["--restart", "latest"]):
             proc = parsph(["run", bar, "--out", out, "--quiet", "--set", "time.end=1e3", *extra])
@@ -242,7 +240,7 @@ def test_restarted_and_stopped_runs_write_the_same_files_as_a_straight_run(bar, 
     assert words[:2] == ["parsph", "run"] and "time.wall_limit=1e-9" in words  # the --set options kept
     words[words.index("time.wall_limit=1e-9")] = "time.wall_limit=0"
     cont = subprocess.run([sys.executable, "-m", "parsph", *words[1:], "--quiet"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
+                          text=True, timeout=CEILING)
     assert cont.returncode == 0, cont.stderr
     assert_same_run(straight, stopped)
 
@@ -253,7 +251,7 @@ def test_the_continue_command_runs_as_printed(bar, tmp_path):
                    "--set", "output.history_interval=0.0"])
     words = shlex.split(proc.stdout.split("continue with: ")[1].splitlines()[0])
     cont = subprocess.run([sys.executable, "-m", "parsph", *words[1:], "--quiet", "--set", "time.max_steps=30"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+                          cwd=ROOT, capture_output=True, text=True, timeout=CEILING)
     assert cont.returncode == 0, cont.stderr
     assert "stopped by" in cont.stdout  # the wall limit, kept as given, stops it again
     with h5py.File(out / "history.h5", "r") as f:
@@ -293,19 +291,17 @@ def test_two_ranks_refuse_a_directory_in_use(bar, tmp_path):
     out = tmp_path / "out"
     first = _start([bar, "--out", out, "--set", "time.end=1e3"])
     try:
-        deadline = time.monotonic() + 120
-        while not (out / "history.h5").exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
+        wait_for(lambda: (out / "history.h5").exists(), poll=0.1)
         proc = subprocess.run([mpiexec(), "-n", "2", sys.executable, "-m", "parsph", "run", str(bar), "--out",
                                str(out), "--quiet", "--overwrite"], cwd=ROOT, capture_output=True, text=True,
-                              timeout=120)
+                              timeout=CEILING)
         refused(proc, "in use by another run")
     finally:
         os.killpg(first.pid, signal.SIGKILL)
         first.communicate()
 
 
-@pytest.mark.timeout(30)
+@pytest.mark.timeout(CEILING)
 def test_an_output_interval_far_below_the_step_fires_every_step_at_once():
     from parsph.run import Schedule
 

@@ -168,6 +168,7 @@ def test_a_snapshot_with_a_value_that_is_not_finite_is_refused_before_it_is_writ
     before = (tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()
     sim.v[7, 1] = np.inf
     sim.step_count += 1
-    with pytest.raises(ParsphError, match=rf"the snapshot at step 1, .*velocity of particle {sim.gid[7]} is not finite"):
+    message = rf"the snapshot at step 1, .*velocity of particle {sim.gid[7]} is not finite"
+    with pytest.raises(ParsphError, match=message):
         writer.write(sim, ["position", "velocity"])
     assert ((tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()) == before

@@ -263,7 +263,7 @@ def test_a_step_within_a_relative_1e_12_of_the_end_lands_on_it():
 def run_failing(tmp_path, text, ranks=1, *extra):
     scene = tmp_path / "scene.toml"
     scene.write_text(text)
-    proc = parsph(["run", scene, "--out", tmp_path / "out", "--quiet", *extra], ranks=ranks, timeout=120)
+    proc = parsph(["run", scene, "--out", tmp_path / "out", "--quiet", *extra], ranks=ranks)
     err = proc.stderr
     assert proc.returncode == 1, f"exit code {proc.returncode}\n{err}"
     assert "Traceback" not in err and ".." not in err, err

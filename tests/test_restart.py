@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import ROOT, RUNS, mpiexec, parsph
+from conftest import CEILING, ROOT, RUNS, mpiexec, parsph, wait_for
 
 FIELDS = '["position","velocity","J"]'
 PATCH = ["--set", f"output.snapshot_fields={FIELDS}", "--set", "output.history_every=10",
@@ -188,13 +188,11 @@ def test_killed_run_leaves_readable_files_and_a_restartable_checkpoint(tmp_path,
            "--set", "output.snapshot_interval=0.5", "--set", "time.end=1000"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True, env=env)
-    deadline = time.monotonic() + 120
-    while not list((out / "checkpoints").glob("step_*.h5")) and time.monotonic() < deadline:
-        time.sleep(0.2)
+    wait_for(lambda: list((out / "checkpoints").glob("step_*.h5")), poll=0.2)
     time.sleep(np.random.default_rng().uniform(0.5, 3.0))  # a random moment after a checkpoint
     victims = kill_processes_mentioning(str(out))  # the ranks and the launcher, like an OOM kill
     assert len(victims) >= 2, proc.communicate()  # the job was still running
-    proc.wait(timeout=30)
+    proc.wait(timeout=CEILING)
     with h5py.File(out / "history.h5", "r") as f:
         assert len(f["time"]) > 0 and np.all(np.isfinite(f["kinetic_energy"][()]))
     with h5py.File(out / "snapshots.h5", "r") as f:
@@ -209,12 +207,10 @@ def test_sigterm_writes_a_checkpoint_and_stops(tmp_path):
     cmd = [sys.executable, "-m", "parsph", "run", str(RUNS / "patch_random.toml"), "--out", str(out),
            "--quiet", *PATCH, "--set", "time.end=1000"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while not (out / "history.h5").exists() and time.monotonic() < deadline:
-        time.sleep(0.2)
+    wait_for(lambda: (out / "history.h5").exists(), poll=0.2)
     time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
-    stdout, stderr = proc.communicate(timeout=60)
+    stdout, stderr = proc.communicate(timeout=CEILING)
     assert proc.returncode == 128 + signal.SIGTERM, stderr
     assert "stopped by SIGTERM" in stdout and "--restart latest" in stdout
     assert list((out / "checkpoints").glob("step_*.h5"))
