@@ -366,11 +366,23 @@ def compile_stages(dim: int, law: int, updated: bool = False):
 
     @njit(cache=True)
     def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi):
-        """F, stress, w P, J and psi at integration points lo..hi-1; returns the first
-        inverted point or -1."""
+        """F = I + sum_J (d_J - d_base) (x) G_J, the stress, w P, J and psi at integration
+        points lo..hi-1; returns the first inverted point or -1. With an updated reference
+        (Eulerian kernel) that gradient is the motion fs from the reference, F = fs F^r, and
+        the forces take V^0 P F^rT = V^r P^r [V eq. 14]; in the total-Lagrangian case fs and
+        F are one array."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP,
-                           J, psi)
+        P = np.empty((dim, dim))
+        work = np.empty((update.WORK, 3, 3))
+        undamaged = state[:, :0]  # damage is computed at particles only (config)
+        first_bad = -1
+        for q in range(lo, hi):
+            gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
+            bad = stress_at(dim, law, updated, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
+                            work, F, VP, J, psi)
+            if bad and first_bad < 0:
+                first_bad = q
+        return first_bad
 
     @njit(cache=True)
     def forces(lo, hi, ptr, idx, g, VP, f_int):
@@ -387,22 +399,3 @@ def compile_stages(dim: int, law: int, updated: bool = False):
                     f_int[i, a] -= s
 
     return kinematics_stress, forces
-
-
-@njit(cache=True, inline="always")
-def _kinematics(dim, law, updated, lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J,
-                psi):
-    """F = I + sum_J (d_J - d_base) (x) G_J at each point; updated reference (Eulerian
-    kernel): that is the motion from the reference fs, F = fs F^r, and the forces take
-    V^0 P F^rT = V^r P^r [V eq. 14]. In the total-Lagrangian case fs and F are one array."""
-    P = np.empty((dim, dim))
-    work = np.empty((update.WORK, 3, 3))
-    undamaged = state[:, :0]  # damage is computed at particles only (config)
-    first_bad = -1
-    for q in range(lo, hi):
-        gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-        bad = stress_at(dim, law, updated, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
-                        work, F, VP, J, psi)
-        if bad and first_bad < 0:
-            first_bad = q
-    return first_bad

@@ -80,9 +80,12 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
     reference, Hessian stabilisation, tensile damage (materials.damage: only the stages of a
     damaged body compile it). Each stage works on the owned rows lo..hi-1.
 
-    The switches are closure constants; the stage bodies are inlined, so branches on them
-    are folded away by the compiler. `gradient` and `hessian_transpose` are the extra
-    passes of Hessian's-difference stabilisation.
+    The switches are closure constants, so branches on them are folded away by the
+    compiler. The stage bodies are written out here rather than inlined from module-level
+    functions: Numba inlines a function by copying its IR (per block, with its whole scope),
+    and for bodies this size that copy took about a third of each variant's compile time.
+    `gradient` and `hessian_transpose` are the extra passes of Hessian's-difference
+    stabilisation.
     """
     source = _SOURCE_HASH
 
@@ -90,7 +93,8 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
     def gradient(lo, hi, ptr, idx, g, d, f):
         """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles lo..hi-1 [V eq. 12]."""
         source  # noqa: B018 - keys the disk cache to the source text
-        _gradient(dim, lo, hi, ptr, idx, g, d, f)
+        for i in range(lo, hi):
+            gradient_row(dim, i, i, ptr, idx, g, d, f)
 
     @njit(cache=True)
     def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
@@ -99,9 +103,46 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         new material and damage state (trial, damage_trial) and (variational form)
         hourglass penalty hg_psi; returns the first inverted particle or -1."""
         source  # noqa: B018 - keys the disk cache to the source text
-        return _kinematics(dim, law, hourglass, updated, hessian, damaged, lo, hi, ptr, idx, g, q, gh, dx, hgc, d,
-                           volume, youngs, c, state, trial, (damage_state, damage_trial), f, fs, F, Fr, VP, J, psi,
-                           hg_psi)
+        P = np.empty((dim, dim))
+        work = np.empty((update.WORK, 3, 3))
+        err = np.empty(dim)
+        first_bad = -1
+        for i in range(lo, hi):
+            # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
+            if hessian:
+                for a in range(dim):
+                    for b in range(dim):
+                        fs[i, a, b] = f[i, a, b]
+                for p in range(ptr[i], ptr[i + 1]):
+                    j = idx[p]
+                    for a in range(dim):
+                        dd = d[j, a] - d[i, a]
+                        for b in range(dim):
+                            fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
+            else:
+                gradient_row(dim, i, i, ptr, idx, g, d, fs)
+            if stress_at(dim, law, updated, damaged, i, fs, Fr, volume[i], c, state, trial, damage_state,
+                         damage_trial, P, work, F, VP, J, psi) and first_bad < 0:
+                first_bad = i
+            if hourglass == HOURGLASS_VARIATIONAL:
+                # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
+                phi = 0.0
+                for p in range(ptr[i], ptr[i + 1]):
+                    j = idx[p]
+                    k = hgc[p] * youngs[i]
+                    e2 = 0.0
+                    for a in range(dim):
+                        fx = 0.0
+                        for b in range(dim):
+                            fx += fs[i, a, b] * dx[p, b]
+                        err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
+                        e2 += err[a] * err[a]
+                    phi += 0.5 * k * e2
+                    for a in range(dim):
+                        for b in range(dim):
+                            VP[i, a, b] += k * err[a] * dx[p, b]
+                hg_psi[i] = phi
+        return first_bad
 
     @njit(cache=True)
     def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
@@ -121,10 +162,81 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
     @njit(cache=True)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
                volume, f_int, f_hg):
-        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg."""
+        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg. With
+        Hessian stabilisation the force is the standard one for V P - B with g plus the
+        standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
+        sign as DATA_SHEET §A] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
+        uses particle i's correction for both terms and does not conserve linear momentum."""
         source  # noqa: B018 - keys the disk cache to the source text
-        _forces(dim, force_form, hourglass, hessian, lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx,
-                hgc, hreg, d, fs, VP, B, youngs, volume, f_int, f_hg)
+        pair_form = force_form == FORCE_PAIR
+        xij = np.empty(dim)
+        for i in range(lo, hi):
+            for a in range(dim):
+                f_int[i, a] = 0.0
+                if hourglass != HOURGLASS_OFF:
+                    f_hg[i, a] = 0.0
+            if force_form == FORCE_VIRTUAL_WORK:
+                for a in range(dim):
+                    s = 0.0
+                    for b in range(dim):
+                        if hessian:
+                            s += (VP[i, a, b] - B[i, a, b]) * g_sum[i, b] + VP[i, a, b] * q_sum[i, b]
+                        else:
+                            s += VP[i, a, b] * g_sum[i, b]
+                    f_int[i, a] = s
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                if force_form == FORCE_RLM:
+                    ratio = volume[i] / volume[j]
+                    for a in range(dim):
+                        s = 0.0
+                        for b in range(dim):
+                            s += (VP[i, a, b] + ratio * VP[j, a, b]) * g[p, b]
+                        f_int[i, a] += s
+                else:
+                    for a in range(dim):
+                        s = 0.0
+                        for b in range(dim):
+                            if hessian:
+                                s -= (VP[j, a, b] - B[j, a, b]) * g_rev[p, b] + VP[j, a, b] * q_rev[p, b]
+                                if pair_form:
+                                    s += (VP[i, a, b] - B[i, a, b]) * g[p, b] + VP[i, a, b] * q[p, b]
+                            else:
+                                s -= VP[j, a, b] * g_rev[p, b]
+                                if pair_form:
+                                    s += VP[i, a, b] * g[p, b]
+                        f_int[i, a] += s
+                if hourglass == HOURGLASS_PAPER:
+                    # [G eq. 27, 32]: errors projected on the current separation, central force
+                    r2 = 0.0
+                    for a in range(dim):
+                        xij[a] = dx[p, a] + d[j, a] - d[i, a]
+                        r2 += xij[a] * xij[a]
+                    r = math.sqrt(r2)
+                    di = 0.0
+                    dj = 0.0
+                    for a in range(dim):
+                        fi = 0.0
+                        fj = 0.0
+                        for b in range(dim):
+                            fi += fs[i, a, b] * dx[p, b]
+                            fj += fs[j, a, b] * dx[p, b]
+                        di += (fi - xij[a]) * xij[a]
+                        dj += (fj - xij[a]) * xij[a]
+                    if r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
+                        c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
+                        for a in range(dim):
+                            f_hg[i, a] += c * xij[a]
+                elif hourglass == HOURGLASS_VARIATIONAL:
+                    # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
+                    for a in range(dim):
+                        xa = dx[p, a] + d[j, a] - d[i, a]
+                        fi = 0.0
+                        fj = 0.0
+                        for b in range(dim):
+                            fi += fs[i, a, b] * dx[p, b]
+                            fj += fs[j, a, b] * dx[p, b]
+                        f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
 
     return gradient, kinematics_stress, hessian_transpose, forces
 
@@ -179,137 +291,6 @@ def stress_at(dim, law, updated, with_damage, i, fs, Fr, w, c, state, trial, dam
             else:
                 VP[i, a, b] = w * P[a, b]
     return not (broken or (math.isfinite(e) and J[i] > 0.0))
-
-
-@njit(cache=True, inline="always")
-def _gradient(dim, lo, hi, ptr, idx, g, d, f):
-    for i in range(lo, hi):
-        gradient_row(dim, i, i, ptr, idx, g, d, f)
-
-
-@njit(cache=True, inline="always")
-def _kinematics(dim, law, hourglass, updated, hessian, with_damage, lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume,
-                youngs, c, state, trial, damage_pair, f, fs, F, Fr, VP, J, psi, hg_psi):
-    damaged, damaged_trial = damage_pair
-    P = np.empty((dim, dim))
-    work = np.empty((update.WORK, 3, 3))
-    err = np.empty(dim)
-    first_bad = -1
-    for i in range(lo, hi):
-        # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
-        if hessian:
-            for a in range(dim):
-                for b in range(dim):
-                    fs[i, a, b] = f[i, a, b]
-            for p in range(ptr[i], ptr[i + 1]):
-                j = idx[p]
-                for a in range(dim):
-                    dd = d[j, a] - d[i, a]
-                    for b in range(dim):
-                        fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
-        else:
-            gradient_row(dim, i, i, ptr, idx, g, d, fs)
-        if stress_at(dim, law, updated, with_damage, i, fs, Fr, volume[i], c, state, trial, damaged, damaged_trial, P,
-                     work, F, VP, J, psi) \
-                and first_bad < 0:
-            first_bad = i
-        if hourglass == HOURGLASS_VARIATIONAL:
-            # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
-            phi = 0.0
-            for p in range(ptr[i], ptr[i + 1]):
-                j = idx[p]
-                k = hgc[p] * youngs[i]
-                e2 = 0.0
-                for a in range(dim):
-                    fx = 0.0
-                    for b in range(dim):
-                        fx += fs[i, a, b] * dx[p, b]
-                    err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
-                    e2 += err[a] * err[a]
-                phi += 0.5 * k * e2
-                for a in range(dim):
-                    for b in range(dim):
-                        VP[i, a, b] += k * err[a] * dx[p, b]
-            hg_psi[i] = phi
-    return first_bad
-
-
-@njit(cache=True, inline="always")
-def _forces(dim, force_form, hourglass, hessian, lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc,
-            hreg, u, F, VP, B, youngs, volume, f_int, f_hg):
-    """With Hessian stabilisation the force is the standard one for V P - B with g plus the
-    standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1, sign
-    as DATA_SHEET §A] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it uses
-    particle i's correction for both terms and does not conserve linear momentum."""
-    pair_form = force_form == FORCE_PAIR
-    xij = np.empty(dim)
-    for i in range(lo, hi):
-        for a in range(dim):
-            f_int[i, a] = 0.0
-            if hourglass != HOURGLASS_OFF:
-                f_hg[i, a] = 0.0
-        if force_form == FORCE_VIRTUAL_WORK:
-            for a in range(dim):
-                s = 0.0
-                for b in range(dim):
-                    if hessian:
-                        s += (VP[i, a, b] - B[i, a, b]) * g_sum[i, b] + VP[i, a, b] * q_sum[i, b]
-                    else:
-                        s += VP[i, a, b] * g_sum[i, b]
-                f_int[i, a] = s
-        for p in range(ptr[i], ptr[i + 1]):
-            j = idx[p]
-            if force_form == FORCE_RLM:
-                ratio = volume[i] / volume[j]
-                for a in range(dim):
-                    s = 0.0
-                    for b in range(dim):
-                        s += (VP[i, a, b] + ratio * VP[j, a, b]) * g[p, b]
-                    f_int[i, a] += s
-            else:
-                for a in range(dim):
-                    s = 0.0
-                    for b in range(dim):
-                        if hessian:
-                            s -= (VP[j, a, b] - B[j, a, b]) * g_rev[p, b] + VP[j, a, b] * q_rev[p, b]
-                            if pair_form:
-                                s += (VP[i, a, b] - B[i, a, b]) * g[p, b] + VP[i, a, b] * q[p, b]
-                        else:
-                            s -= VP[j, a, b] * g_rev[p, b]
-                            if pair_form:
-                                s += VP[i, a, b] * g[p, b]
-                    f_int[i, a] += s
-            if hourglass == HOURGLASS_PAPER:
-                # [G eq. 27, 32]: errors projected on the current separation, central force
-                r2 = 0.0
-                for a in range(dim):
-                    xij[a] = dx[p, a] + u[j, a] - u[i, a]
-                    r2 += xij[a] * xij[a]
-                r = math.sqrt(r2)
-                di = 0.0
-                dj = 0.0
-                for a in range(dim):
-                    fi = 0.0
-                    fj = 0.0
-                    for b in range(dim):
-                        fi += F[i, a, b] * dx[p, b]
-                        fj += F[j, a, b] * dx[p, b]
-                    di += (fi - xij[a]) * xij[a]
-                    dj += (fj - xij[a]) * xij[a]
-                if r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
-                    c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
-                    for a in range(dim):
-                        f_hg[i, a] += c * xij[a]
-            elif hourglass == HOURGLASS_VARIATIONAL:
-                # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
-                for a in range(dim):
-                    xa = dx[p, a] + u[j, a] - u[i, a]
-                    fi = 0.0
-                    fj = 0.0
-                    for b in range(dim):
-                        fi += F[i, a, b] * dx[p, b]
-                        fj += F[j, a, b] * dx[p, b]
-                    f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
 
 
 def hourglass_coefficients(form, rows, idx, dx, w, h, volume, measure, alpha: float):

@@ -4,8 +4,10 @@ tools/test puts this folder on PYTHONPATH and names a folder in PARSPH_COMPILE_L
 then loads this module at the start of every process (pytest's workers, the `parsph` runs
 the tests start, every MPI rank). Once the process imports numba, a listener times each
 outermost compilation (a cache miss: "numba:compile" events; loading from the on-disk
-cache is not one), and at exit the process writes "COUNT SECONDS" to PID.txt in that
-folder. tools/compile_clock/report.py sums them. Without PARSPH_COMPILE_LOG it does nothing.
+cache is not one), and at exit the process writes a line "SECONDS NAME TEST" per
+compilation (TEST: the pytest test that ran, from PYTEST_CURRENT_TEST) to PID.txt in that
+folder. tools/compile_clock/report.py sums them. Without
+PARSPH_COMPILE_LOG it does nothing.
 """
 
 import os
@@ -17,7 +19,8 @@ if os.environ.get("PARSPH_COMPILE_LOG"):
     import sys
     import time
 
-    _clock = {"depth": 0, "start": 0.0, "seconds": 0.0, "count": 0}
+    _clock = {"depth": 0, "start": 0.0}
+    _compiled = []  # (seconds, function name, test) of each outermost compilation
 
     def _listen(event):
         """Register the timer with numba.core.event (the module, just executed)."""
@@ -31,8 +34,10 @@ if os.environ.get("PARSPH_COMPILE_LOG"):
             def on_end(self, ev):
                 _clock["depth"] -= 1
                 if _clock["depth"] == 0:
-                    _clock["seconds"] += time.perf_counter() - _clock["start"]
-                    _clock["count"] += 1
+                    name = getattr(ev.data["dispatcher"], "py_func", None)
+                    name = getattr(name, "__qualname__", "?").replace(".<locals>.", ".")
+                    test = os.environ.get("PYTEST_CURRENT_TEST", "-").split(" ")[0]
+                    _compiled.append((time.perf_counter() - _clock["start"], name, test))
 
         event.register("numba:compile", Timer())
 
@@ -55,10 +60,10 @@ if os.environ.get("PARSPH_COMPILE_LOG"):
             return spec
 
     def _write():
-        if _clock["count"]:
+        if _compiled:
             path = os.path.join(os.environ["PARSPH_COMPILE_LOG"], f"{os.getpid()}.txt")
             with open(path, "w") as fh:
-                fh.write(f"{_clock['count']} {_clock['seconds']:.3f}\n")
+                fh.writelines(f"{seconds:.3f} {name} {test}\n" for seconds, name, test in _compiled)
 
     sys.meta_path.insert(0, _WhenNumbaLoads())
     atexit.register(_write)
