@@ -41,7 +41,7 @@ from numba import njit
 
 from parsph.errors import InputError
 from parsph.fields import Field, register
-from parsph.formulations.base import Stage, source_hash
+from parsph.formulations.base import CompiledOnce, Stage, source_hash
 from parsph.formulations import tlsph
 from parsph.formulations.reference import PairOptions
 from parsph.formulations.tlsph import gradient_row, stress_at
@@ -398,4 +398,5 @@ def compile_stages(dim: int, law: int, updated: bool = False):
                         s += VP[q, a, b] * g[p, b]
                     f_int[i, a] -= s
 
-    return kinematics_stress, forces
+    variant = f"{_SOURCE_HASH} {dim} {law} {updated}"
+    return CompiledOnce(kinematics_stress, variant), CompiledOnce(forces, variant)

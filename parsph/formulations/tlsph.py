@@ -53,7 +53,7 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.formulations.base import source_hash
+from parsph.formulations.base import CompiledOnce, source_hash
 from parsph.materials import damage, elastic, elastoplastic, update
 from parsph.materials.elastic import det, right_cauchy_green
 
@@ -238,7 +238,8 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                             fj += fs[j, a, b] * dx[p, b]
                         f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
 
-    return gradient, kinematics_stress, hessian_transpose, forces
+    variant = f"{_SOURCE_HASH} {dim} {law} {force_form} {hourglass} {updated} {hessian} {damaged}"
+    return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
 
 
 @njit(cache=True, inline="always")
