@@ -69,13 +69,21 @@ def run(out, ranks, *extra, scene="patch_random", env=None):
     return proc
 
 
+@pytest.fixture(scope="module")
+def straight(tmp_path_factory):
+    """patch_random straight to step 80 on one rank: the answer on every rank count."""
+    out = tmp_path_factory.mktemp("straight")
+    run(out, 1, "--set", "time.max_steps=80")
+    return out
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("first, second, serial_hdf5", [(1, 1, False), (2, 2, False), (1, 3, False),
                                                         (3, 2, False), (2, 2, True)])
-def test_restart_continues_bit_for_bit(tmp_path, first, second, serial_hdf5):
+def test_restart_continues_bit_for_bit(tmp_path, straight, first, second, serial_hdf5):
+    """Stopped at step 40 on `first` ranks and continued on `second`: the same files as the
+    straight run (one rank; the answer does not depend on the rank count)."""
     env = {"PARSPH_SERIAL_HDF5": "1"} if serial_hdf5 else None
-    straight = tmp_path / "straight"
-    run(straight, first, "--set", "time.max_steps=80", env=env)
     split = tmp_path / "split"
     run(split, first, "--set", "time.max_steps=40", "--set", "output.checkpoint_every=40", env=env)
     assert (split / "checkpoints" / "step_00000040.h5").exists()
