@@ -1,6 +1,6 @@
 """Essential boundary conditions on non-interpolating shape functions, by boundary
 collocation: the explicit form of the transformation method (Chen & Wang 2000; [R] leaves
-the technique open, DATA_SHEET §0).
+the technique open).
 
 The MLS shape functions of EFG do not pass through the particle values: the velocity at a
 particle is v^h(X_I) = sum_J Phi_J(X_I) v_J, not v_I. After the loop has written the

@@ -1,7 +1,7 @@
 """The compressible Mooney-Rivlin law of [R eq. 18] (materials/elastic.py,
 `material.model = "mooney_rivlin"`): its stress against the printed formula, the energy it
 derives from, its small-strain moduli, frame indifference, and energy conservation in a run.
-Constants of [R §9.6] (DATA_SHEET §B): c1 = 1.265e5, c2 = 1.012e4, lambda = 1.012e7 Pa."""
+Constants of [R §9.6]: c1 = 1.265e5, c2 = 1.012e4, lambda = 1.012e7 Pa."""
 
 from __future__ import annotations
 
@@ -75,7 +75,7 @@ def test_stress_is_the_printed_formula_and_the_energy_gradient(dim):
 
 def test_small_strain_moduli_are_mu_c1_plus_c2_and_k_two_lambda():
     """For a small strain eps (1e-7) the law is linear elastic with mu = c1 + c2 =
-    1.3662e5 Pa and K = 2 lambda = 2.024e7 Pa (DATA_SHEET §B), the moduli parsph uses for
+    1.3662e5 Pa and K = 2 lambda = 2.024e7 Pa, the moduli parsph uses for
     the wave speed (403.6 m/s at [R]'s density)."""
     c = constants({"model": "mooney_rivlin", "density": 125.4, "c1": C1, "c2": C2, "lambda": LAMBDA})
     assert c.mu == pytest.approx(1.3662e5, rel=1e-12) and c.bulk == pytest.approx(2.024e7, rel=1e-12)
@@ -171,7 +171,7 @@ def test_tait_pressure_is_the_equation_of_state_and_the_energy_gradient(dim):
 
 
 def test_tait_sound_speed_and_its_growth_under_compression():
-    """c0 = sqrt(gamma B / rho0) = 57.4 m/s (DATA_SHEET §B); under compression the stable
+    """c0 = sqrt(gamma B / rho0) = 57.4 m/s ([R §9.7]'s water); under compression the stable
     step uses c^2 = c0^2 (rho/rho0)^(gamma - 1): a factor J^(1 - gamma) (1.88 at J = 0.9)."""
     from parsph.materials.elastic import TAIT_FLUID as law
     from parsph.materials.update import stiffening

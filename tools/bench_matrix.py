@@ -9,7 +9,7 @@ Variants: total-Lagrangian SPH with alpha = 0, alpha = 50 (paper form) and alpha
 steps, without and with eta = 0.3 [V §3.3-3.4]; on the beam the updated formulation with
 eta = 0.3 and an update every 30 steps.
 
-And Rabczuk, Belytschko & Xiao's two benchmarks [R §9.1-9.2, DATA_SHEET §C], for every
+And Rabczuk, Belytschko & Xiao's two benchmarks [R §9.1-9.2], for every
 method x kernel of the table METHODS (one line a row): corrected SPH (tlsph) with alpha = 0
 and 50, symmetrised SPH (and, on the cantilever, SPH with the support of n = 4 kept at every
 resolution, [R Fig. 7]), RLM, KBM, EFG with nodal and with cell integration, each with the

@@ -1,6 +1,6 @@
 """Meshfree Galerkin methods: F and the stress at integration points, forces from
-test-function gradients [R §4.3-5.3; eq. 26-32, 37-43, 60, 63-69; implementation forms:
-DATA_SHEET §A]; a Lagrangian kernel, or for kbm and nodal efg an Eulerian one [R Table 2]
+test-function gradients [R §4.3-5.3; eq. 26-32, 37-43, 60, 63-69; in the forms below,
+where [R] leaves them open]; a Lagrangian kernel, or for kbm and nodal efg an Eulerian one [R Table 2]
 (the same sums in the updated reference, rebuilt at every step; the stress points move with
 the body, `moved`).
 
@@ -27,7 +27,7 @@ owner of q computes them and they are copied to q's ghosts at each build. sum_I 
 at every q, so linear momentum is conserved; the sums run over particles, then the other
 set, each in global-id order.
 
-MLS gradient (DATA_SHEET §A), with the basis centred at X_q and scaled by a length l of q,
+MLS gradient (the derivative of [R eq. 40]), with the basis centred at X_q and scaled by a length l of q,
 p_J = (1, (X_J - X_q) / l), M = sum_J W_J p_J p_J^T, gamma = M^-1 e_0:
     d_a Phi_J = (M^-1 p_J)_(1+a) W_J / l - gamma . (d_a M) M^-1 p_J W_J + (gamma . p_J) d_a W_J.
 """

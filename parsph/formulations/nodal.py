@@ -9,8 +9,8 @@
   sph    symmetrised SPH [R eq. 21-25, 57, Table 1]: the plain kernel gradient
          g_ij = V_j grad_i W_ij, forces f_i = V_i sum_j (P_i + P_j) g_ij (momentum-conserving)
   rlm    Randles-Libersky normalisation [R eq. 33-34, Table 1]: the corrected gradient in
-         F and in the force row f_i = V_i sum_j (P_i + P_j) g_ij (DATA_SHEET §A: the printed
-         sign corrected; not momentum-conserving)
+         F and in the force row f_i = V_i sum_j (P_i + P_j) g_ij (the sign printed in
+         [R] corrected; not momentum-conserving)
 
 sph and rlm take an Eulerian kernel (`kernel = "eulerian"`, [R eq. 16, Table 2]) as the
 updated reference rebuilt at every step: kernel, neighbours and corrections in the current

@@ -165,7 +165,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg. With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
-        sign as DATA_SHEET §A] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
+        its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
         uses particle i's correction for both terms and does not conserve linear momentum."""
         source  # noqa: B018 - keys the disk cache to the source text
         pair_form = force_form == FORCE_PAIR

@@ -2,7 +2,7 @@
 [R §5.3, eq. 66-69].
 
 [R] uses quadtree cells with n_Q x n_Q Gauss points, n_Q = sqrt(m) + 2 for m particles in
-a cell, and leaves cell size and rounding open (DATA_SHEET §A). Here the cells tile the box
+a cell, and leaves cell size and rounding open. Here the cells tile the box
 (particles set back half a spacing from the faces, so the box is the union of the
 particles' cells) two lattice cells wide along each axis, the last one one cell wide when
 a count is odd; a cell with k_a particles along axis a gets k_a + 2 Gauss-Legendre points

@@ -1,7 +1,7 @@
 """Stress points of a box lattice or a polar ring [R §5.2] and the quadrature weights of
 particles and stress points together.
 
-[R] intersperses stress points between the particles without saying where (DATA_SHEET §A);
+[R] intersperses stress points between the particles without saying where;
 the counts it prints fit one stress point at the centre of each cell of the particle
 lattice, which is the rule used here: a box of n_1 x ... x n_d particles has
 (n_1 - 1) x ... x (n_d - 1) stress points. The quadrature weights are the volumes of the
