@@ -241,7 +241,7 @@ class Simulation:
         efg = any(collocated(b.formulation) for b in self.bodies)
         self.collocation = BoundaryCollocation(self) if efg and self.scene["bc"] else None
         self.walls.select(self.groups)
-        self._omega_hg2 = self._hourglass_frequencies()
+        self._check_hourglass_stiffness()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 
@@ -342,12 +342,12 @@ class Simulation:
             return np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
         return np.zeros((keep,) + field.shape(self.dim))
 
-    def _hourglass_frequencies(self) -> np.ndarray:
-        """omega_hg^2 = 2 sum_j c_ij (E_i + E_j) / m_i: a Gershgorin bound on the stiffness of
-        each particle's hourglass springs (zero without hourglass control)."""
+    def _check_hourglass_stiffness(self) -> None:
+        """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
+        frequency squared, overflows (an absurd formulation.hourglass)."""
         n, ref = self.n_owned, self.ref
         if not self.hourglass or not len(ref.idx):
-            return np.zeros(n)
+            return
         rows = np.repeat(np.arange(n), np.diff(ref.ptr))
         with np.errstate(over="ignore", invalid="ignore"):
             k = ref.hgc * (self.youngs[rows] + self.youngs[ref.idx])
@@ -360,7 +360,6 @@ class Simulation:
                 raise InputError(f"formulation.hourglass = {alpha:g}: the hourglass stiffness of particle "
                                  f"{self.gid[i]} over its mass, {out[i]:g} 1/s^2, overflows the range of double "
                                  "precision ([G] recommends 50)")
-        return out
 
     def stable_time_step(self) -> tuple:
         """(size of the next step, largest incremental log strain): time.dt if fixed, else
@@ -379,10 +378,12 @@ class Simulation:
         time.step_floor times the first one, raises the error naming the particle with the
         smallest step on any rank."""
         dt, strain, smallest = np.inf, 0.0, -1
+        ref = self.ref
         for b in self.bodies:  # in row order: the first particle with the smallest step
             step, worst, first = tlsph.stable_time_step(
-                b.lo, b.hi, self.fs, self.F, self.J, self.ref.min_spacing, self.ref.stiffening,
-                self._omega_hg2, b.constants.wave_speed, b.law.law_id, b.constants.values, self.dim, self.broken)
+                b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
+                b.law.law_id, b.constants.values, self.dim, self.broken, ref.ptr, ref.idx, ref.dx, self.d, ref.hgc,
+                ref.hreg, self.youngs, self.mass, b.formulation.hourglass_form)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -664,7 +665,7 @@ class Simulation:
                     b.formulation.build(self, b, self.scene["kernel"]["type"])
         if self.collocation:
             self.collocation = BoundaryCollocation(self)
-        self._omega_hg2 = self._hourglass_frequencies()
+        self._check_hourglass_stiffness()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 

@@ -53,6 +53,7 @@ center = [0.6, 0.4]
 [time]
 end = 1.0
 max_steps = 60
+cfl = 0.3  # about a quarter turn in 60 steps
 [output]
 history_every = 10
 snapshot_interval = 1.0e-3

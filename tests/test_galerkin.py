@@ -178,7 +178,7 @@ def test_efg_force_is_the_strain_energy_gradient_kbm_is_not(method):
 
 
 # L2 error of the tip displacement, period, and the largest total-energy change (measured)
-BAR = {"kbm": (0.16, 0.02, 0.12), "efg_nodal": (0.22, 0.025, 2e-3), "efg_cells": (0.22, 0.025, 2e-3)}
+BAR = {"kbm": (0.16, 0.02, 0.12), "efg_nodal": (0.22, 0.025, 6e-3), "efg_cells": (0.22, 0.025, 6e-3)}
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -187,7 +187,8 @@ def test_bar1d_follows_the_analytic_bar(method):
     stress and Gauss points need), [R]'s kernel, two periods of the fundamental mode.
     Measured: L2 error of the tip displacement 0.125 (kbm), 0.185 (efg nodal), 0.181 (efg
     cells); period -0.9 %, -1.5 %, -1.5 %. EFG's force is the energy gradient: its total
-    energy stays within 8e-4 (the leapfrog's fluctuation). KBM's is not: its total energy
+    energy stays within 3.3e-3 (the leapfrog's fluctuation, O(dt^2): 8e-4 at half the
+    default step). KBM's is not: its total energy
     oscillates by up to 8.7 % of the initial energy, without growing."""
     cell = 'geometry.parts.0.placement="cell"'
     if method != "efg_nodal":

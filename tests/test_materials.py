@@ -100,8 +100,8 @@ def test_frame_indifference():
 def test_a_free_block_keeps_its_energy():
     """A free block (corrected SPH, variational hourglass control) set spinning and
     stretched by an initial velocity field: kinetic + strain + hourglass energy stays within
-    the leapfrog's fluctuation, 2e-3 (measured 7.2e-4), over 0.2 s (507 steps, about ten
-    wave transits)."""
+    the leapfrog's fluctuation, 6e-3 (measured 2.9e-3; 7.2e-4 at half the step: O(dt^2)),
+    over 0.2 s (about 250 steps, ten wave transits)."""
     sim = simulation(block_2d(model="mooney_rivlin", hourglass=50.0, extra="""
 [[initial]]
 type = "velocity_field"
@@ -110,7 +110,7 @@ expression = ["2*(x - 0.5) - (y - 0.3)", "(x - 0.5)"]
 """))
     rows = run_until(sim, 0.2, every=20)
     energy_total = rows["total_energy"]
-    assert np.abs(energy_total - energy_total[0]).max() < 2e-3 * energy_total[0]
+    assert np.abs(energy_total - energy_total[0]).max() < 6e-3 * energy_total[0]
 
 
 def test_the_law_takes_its_three_constants_and_no_other():

@@ -227,9 +227,10 @@ def test_bar1d_rlm_follows_the_analytic_bar_sph_conserves_energy_with_a_soft_fre
     """Over two periods of the fundamental mode (4L/c = 0.792 ms), 40 particles:
     L2 error of the tip displacement against the Fourier solution, period from the
     spacing of the downward zero crossings (exact: 0.5 T and 1.5 T), total energy.
-    Measured (tlsph for reference: L2 0.081, period +1.0 %, energy 8e-4):
+    Measured at time.cfl = 0.3 (tlsph for reference: L2 0.081, period +1.0 %, energy 8e-4):
       rlm  L2 0.233, period +2.9 %, energy up to +31 % (not energy-consistent)
-      sph  L2 0.675, period +9.6 %, energy 8e-4 (leapfrog's fluctuation)
+      sph  L2 0.675, period +9.6 %, energy 8e-4 (leapfrog's fluctuation, O(dt^2): 3.5e-3
+      at the default step)
     SPH's interior is the same as tlsph's here (m = 1 in 1D), but the free-end particle
     sees half its strain and half its stress force: the end is soft and the reflections
     come late."""
@@ -250,7 +251,7 @@ def test_bar1d_rlm_follows_the_analytic_bar_sph_conserves_energy_with_a_soft_fre
     assert abs(rlm["period"] - 1) < 0.05
     assert abs(rlm["first"] - 0.5) < 0.05
     assert rlm["energy"] > 0.1
-    assert sph["energy"] < 2e-3
+    assert sph["energy"] < 6e-3
     assert 1.05 < sph["period"] < 1.15
     assert sph["l2"] > 2 * rlm["l2"]
 
@@ -392,7 +393,7 @@ def test_eulerian_kernel_sph_and_rlm_clump_in_tension_efg_and_the_lagrangian_do_
         smallest[kernel] = rows["spacing_min"].min()
         if kernel == "eulerian":  # the shape functions rebuilt at every step, the neighbours searched for
             assert sim.updates == sim.step_count  # at most every 30 (and when a particle moved half the skin)
-            assert sim.step_count / 30 <= sim.searches <= sim.step_count / 10
+            assert sim.step_count / 30 <= sim.searches <= sim.step_count / 5
     assert smallest["lagrangian"] > lagrangian_min
     assert eulerian_range[0] < smallest["eulerian"] < eulerian_range[1]
 

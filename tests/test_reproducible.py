@@ -272,13 +272,13 @@ def run_failing(tmp_path, text, ranks=1, *extra):
 
 
 def test_blow_up_with_a_fixed_step_advises_reducing_time_dt(tmp_path):
-    """The bar of runs/bar1d.toml (neo-Hookean) with time.dt 6.6 times its CFL step."""
+    """The bar of runs/bar1d.toml (neo-Hookean) with time.dt 3.3 times its CFL step."""
     text = BAR.replace("saint_venant_kirchhoff", "neo_hookean").replace("cfl = 0.5", "dt = 1.0e-5")
     err = run_failing(tmp_path, text, 1, "--set", "time.max_steps=1000")
     assert re.search(r"particle \d+ at \(.*\) is inverted", err), err
     assert "reduce time.dt = 1e-05 s" in err and "reduce time.cfl" not in err, err
     step = float(re.search(r"the CFL step, time.cfl times the stable step, was (\S+) s at step 0", err)[1])
-    assert 1e-6 < step < 3e-6, err
+    assert 2e-6 < step < 4e-6, err
 
 
 # the upper part of a 10 x 12 block flattened in y onto y = 0.3 (J = 1e-9 > 0: not inverted,

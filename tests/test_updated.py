@@ -199,7 +199,7 @@ def test_bar_unstabilised_updates_spoil_the_solution_and_hessian_stabilisation_r
         return np.linalg.norm(np.interp(tl["time"], rows["time"], rows["probe"]) - tl["probe"]) / scale
 
     plain, sim = bar_tip(UL + ["formulation.update_every=3"])
-    assert sim.updates >= 700
+    assert sim.updates >= sim.step_count // 3 > 300
     stabilised, _ = bar_tip(UL + ["formulation.update_every=3", "formulation.hessian=0.3"])
     assert distance(plain) > 0.15  # measured 0.20: the odd-even mode grows
     assert distance(stabilised) < 0.04  # measured 0.024

