@@ -383,7 +383,7 @@ class Simulation:
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
                 b.law.law_id, b.constants.values, self.dim, self.broken, ref.ptr, ref.idx, ref.dx, self.d, ref.hgc,
-                ref.hreg, self.youngs, self.mass, b.formulation.hourglass_form)
+                self.youngs, self.mass, b.formulation.hourglass_form)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -560,7 +560,9 @@ class Simulation:
         self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))
+        clock = time.perf_counter()
         self._stable_dt, strain = self.stable_time_step()
+        self.stage_seconds["stable step"] += time.perf_counter() - clock
         if self.updated and ((self.update_every and self.since_update >= self.update_every)
                              or (self.update_strain and strain > self.update_strain)):
             self.update_reference()

@@ -376,62 +376,63 @@ def principal_stretches(F, dim):
 
 
 @njit(cache=True)
-def _largest_eigenvalue(D, dim):
-    """Largest eigenvalue of the symmetric dim x dim matrix D (closed form; D is overwritten)."""
+def _largest_eigenvalue(d00, d11, d22, d01, d12, d02, dim):
+    """Largest eigenvalue of the symmetric dim x dim matrix with these components (closed
+    form)."""
     if dim == 1:
-        return D[0, 0]
+        return d00
     if dim == 2:
-        half = 0.5 * (D[0, 0] + D[1, 1])
-        return half + math.sqrt(max(0.25 * (D[0, 0] - D[1, 1]) ** 2 + D[0, 1] * D[0, 1], 0.0))
-    q = (D[0, 0] + D[1, 1] + D[2, 2]) / 3.0
-    off = D[0, 1] ** 2 + D[0, 2] ** 2 + D[1, 2] ** 2
-    p = math.sqrt(((D[0, 0] - q) ** 2 + (D[1, 1] - q) ** 2 + (D[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
+        return 0.5 * (d00 + d11) + math.sqrt(0.25 * (d00 - d11) ** 2 + d01 * d01)
+    q = (d00 + d11 + d22) / 3.0
+    a, b, c = d00 - q, d11 - q, d22 - q
+    p = math.sqrt((a * a + b * b + c * c + 2.0 * (d01 * d01 + d12 * d12 + d02 * d02)) / 6.0)
     if not p > 1e-14 * abs(q):
         return q
-    for a in range(3):
-        D[a, a] -= q
-    r = max(-1.0, min(1.0, det(D, 3) / (2.0 * p ** 3)))
+    det = a * (b * c - d12 * d12) - d01 * (d01 * c - d12 * d02) + d02 * (d01 * d12 - b * d02)
+    r = max(-1.0, min(1.0, det / (2.0 * p ** 3)))
     return q + 2.0 * p * math.cos(math.acos(r) / 3.0)
 
 
 @njit(cache=True)
-def hourglass_frequency(i, ptr, idx, dx, d, hgc, hreg, youngs, mass, form, dim, D):
+def hourglass_frequency(i, ptr, idx, dx, d, hgc, youngs, mass, form, dim):
     """omega_hg^2 of particle i: a bound on the stiffness of its hourglass springs under the
     current moduli (a yielded particle's is its yield stress, [G §4.5]). Each pair is a
     spring of stiffness k_ij = c_ij (E_i + E_j): along the current separation n_ij with
-    the paper's form (times |x_ij| / (|x_ij| + 0.1 h_ij)), in every direction with the
-    variational one. As (n.(x_i - x_j))^2 <= 2 (n.x_i)^2 + 2 (n.x_j)^2, the largest
+    the paper's form (at most: the force has |x_ij| / (|x_ij| + 0.1 h_ij) of it), in every
+    direction with the variational one. As (n.(x_i - x_j))^2 <= 2 (n.x_i)^2 + 2 (n.x_j)^2, the largest
     eigenvalue of M^-1 K is at most max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i:
     about 1/dim of the scalar sum 2 sum_j k_ij / m_i on a disordered lattice, the same in
-    1D. D: a (3, 3) scratch matrix."""
-    for a in range(dim):
-        for b in range(dim):
-            D[a, b] = 0.0
+    1D."""
+    if form == HOURGLASS_VARIATIONAL:
+        k = 0.0
+        for p in range(ptr[i], ptr[i + 1]):
+            k += hgc[p] * (youngs[i] + youngs[idx[p]])
+        return 2.0 * k / mass[i]
+    d00 = d11 = d22 = d01 = d12 = d02 = 0.0
+    x1 = x2 = 0.0
     for p in range(ptr[i], ptr[i + 1]):
         j = idx[p]
-        k = hgc[p] * (youngs[i] + youngs[j])
-        if form == HOURGLASS_VARIATIONAL:
-            for a in range(dim):
-                D[a, a] += k
-            continue
-        r2 = 0.0
-        for a in range(dim):
-            xa = dx[p, a] + d[j, a] - d[i, a]
-            r2 += xa * xa
+        x0 = dx[p, 0] + d[j, 0] - d[i, 0]
+        if dim > 1:
+            x1 = dx[p, 1] + d[j, 1] - d[i, 1]
+        if dim > 2:
+            x2 = dx[p, 2] + d[j, 2] - d[i, 2]
+        r2 = x0 * x0 + x1 * x1 + x2 * x2
         if not r2 > 0.0:
             continue
-        r = math.sqrt(r2)
-        k /= r * (r + hreg[p])
-        for a in range(dim):
-            xa = dx[p, a] + d[j, a] - d[i, a]
-            for b in range(dim):
-                D[a, b] += k * xa * (dx[p, b] + d[j, b] - d[i, b])
-    return 2.0 * _largest_eigenvalue(D, dim) / mass[i]
+        k = hgc[p] * (youngs[i] + youngs[j]) / r2
+        d00 += k * x0 * x0
+        d11 += k * x1 * x1
+        d22 += k * x2 * x2
+        d01 += k * x0 * x1
+        d12 += k * x1 * x2
+        d02 += k * x0 * x2
+    return 2.0 * _largest_eigenvalue(d00, d11, d22, d01, d12, d02, dim) / mass[i]
 
 
 @njit(cache=True)
 def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken,
-                     ptr, idx, dx, d, hgc, hreg, youngs, mass, hourglass):
+                     ptr, idx, dx, d, hgc, youngs, mass, hourglass):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
@@ -451,7 +452,6 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     dt = np.inf
     worst = 0.0
     smallest = -1
-    D = np.empty((3, 3))
     for i in range(lo, hi):
         if broken[i]:  # failed (materials.damage): no stiffness
             continue
@@ -465,7 +465,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
         w_el = 2.0 * wave_speed * math.sqrt(stiffening) * stab[i] ** 0.75 / length
         w_hg2 = 0.0
         if hourglass != HOURGLASS_OFF:
-            w_hg2 = hourglass_frequency(i, ptr, idx, dx, d, hgc, hreg, youngs, mass, hourglass, dim, D)
+            w_hg2 = hourglass_frequency(i, ptr, idx, dx, d, hgc, youngs, mass, hourglass, dim)
         dt_i = 2.0 / math.sqrt(w_el * w_el + w_hg2)
         if dt_i < dt:
             dt, smallest = dt_i, i
