@@ -223,7 +223,15 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
                                 f"the snapshot at step {sim.step_count}")
         snapshots.write(sim, out["snapshot_fields"])
 
+    def write_history() -> None:
+        """Collective: the history rows in memory to the file (a restart from the next
+        checkpoint finds every row up to it)."""
+        with collective():
+            if history is not None:
+                history.write()
+
     def save_checkpoint():
+        write_history()
         schedules = {"history": history_due.next, "snapshot": snapshot_due.next,
                      "checkpoint": checkpoint_due.next}
         return checkpoint.write_checkpoint(out_dir, sim, schedules, scene, out["checkpoint_keep"])
@@ -260,6 +268,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
                 last = record()
             if not snapshots.times or snapshots.times[-1] != sim.t:
                 snapshot()
+        write_history()
     except output_dir.OutputFull as exc:
         error = ParsphError(f"{exc}; stopped at step {sim.step_count}, t = {sim.t:.6g} s. "
                             f"{_checkpoint_after_full(save_checkpoint, out_dir, scene_path, overrides)}")

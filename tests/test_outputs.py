@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import RUNS, parsph
+from parsph.io import history as history_module
 from physics import simulation
 
 
@@ -172,3 +173,19 @@ def test_a_snapshot_with_a_value_that_is_not_finite_is_refused_before_it_is_writ
     with pytest.raises(ParsphError, match=message):
         writer.write(sim, ["position", "velocity"])
     assert ((tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()) == before
+
+
+def test_history_rows_wait_in_memory_and_reach_the_file_at_a_write_and_at_the_close(tmp_path, monkeypatch):
+    """Rows are written in blocks (at least every WRITE_SECONDS, before every checkpoint,
+    at the end): between writes the file stays readable with the rows written so far."""
+    monkeypatch.setattr(history_module, "WRITE_SECONDS", 3600.0)
+    path = tmp_path / "history.h5"
+    writer = history_module.HistoryWriter(str(path), "{}", {})
+    for step in range(3):
+        writer.append({"time": 0.1 * step, "step": float(step)})
+    writer.write()
+    writer.append({"time": 0.3, "step": 3.0})
+    with h5py.File(path, "r") as f:  # another reader while the run goes on
+        assert list(f["step"][()]) == [0.0, 1.0, 2.0]
+    writer.close()
+    assert list(history_module.read_history(str(path))["step"]) == [0.0, 1.0, 2.0, 3.0]

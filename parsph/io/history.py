@@ -1,19 +1,25 @@
 """`history.h5`: one resizable 1-D dataset per diagnostic and probe, one row per output time.
 
-Written by rank 0 (history values are already global reductions). Each row is flushed, so
-a killed run leaves a readable file. The resolved scene is stored as the attribute `scene`;
-every series carries its units as the attribute `units`.
+Written by rank 0 (history values are already global reductions). Rows are kept in memory
+and written in blocks, each flushed: at least every WRITE_SECONDS of wall time, before every
+checkpoint (a restart finds every row up to it) and at the end, also of a failed run. A
+killed run leaves a readable file without at most the last WRITE_SECONDS of rows, which a
+restart from its checkpoint computes again. The resolved scene is stored as the attribute
+`scene`; every series carries its units as the attribute `units`.
 """
 
 from __future__ import annotations
 
 import os
+import time
 
 import h5py
 import numpy as np
 
 from parsph import quantities
 from parsph.errors import InputError, ParsphError
+
+WRITE_SECONDS = 1.0  # the longest wall time a row waits in memory
 
 
 def units_of(name: str, probe_units: dict) -> str:
@@ -27,7 +33,9 @@ class HistoryWriter:
         that step, as a restarted run continues it."""
         self.path = path
         self.probe_units = probe_units
-        self.rows = 0
+        self.rows = 0  # in the file
+        self.pending = []  # rows not yet written: dicts of values
+        self.written_at = time.monotonic()
         self.series = {}  # name -> open dataset
         if resume_step is not None and os.path.exists(path):
             try:
@@ -45,28 +53,50 @@ class HistoryWriter:
         self.file.attrs["scene"] = scene_json
 
     def row_bytes(self, series: int) -> int:
-        """Bytes the next row of `series` values can add to the file (a new chunk per
-        series every 256 rows)."""
-        return series * (64 + (2048 if self.rows % 256 == 0 else 0))
+        """Bytes the rows in memory and one more of `series` values can add to the file (a
+        new chunk per series every 256 rows)."""
+        rows = len(self.pending) + 1
+        chunks = (self.rows + rows - 1) // 256 - (self.rows - 1) // 256
+        return series * (64 * rows + 2048 * chunks)
 
     def append(self, values: dict) -> None:
-        """Add one row (flushed); a failure is a ParsphError naming the file."""
+        """Add one row: kept in memory, written with the others when WRITE_SECONDS have
+        passed since the last write."""
+        self.pending.append(values)
+        if time.monotonic() - self.written_at >= WRITE_SECONDS:
+            self.write()
+
+    def write(self) -> None:
+        """Write the rows in memory to the file and flush it; a failure is a ParsphError
+        naming the file."""
+        self.written_at = time.monotonic()
+        if not self.pending:
+            return
+        rows, end = self.pending, self.rows + len(self.pending)
         try:
-            for name, value in values.items():
+            for name in rows[0]:
                 ds = self.series.get(name)
                 if ds is None:
                     ds = self.series[name] = self.file.require_dataset(
                         name, shape=(self.rows,), maxshape=(None,), dtype="f8", chunks=(256,))
                     ds.attrs["units"] = units_of(name, self.probe_units)
-                ds.resize((self.rows + 1,))
-                ds[self.rows] = value
+                ds.resize((end,))
+                ds[self.rows:end] = np.array([row[name] for row in rows], dtype=np.float64)
             self.file.flush()
         except Exception as exc:  # noqa: BLE001 - h5py raises several types
             raise ParsphError(f"writing {self.path} failed ({type(exc).__name__}: {exc})") from None
-        self.rows += 1
+        self.rows, self.pending = end, []
 
     def close(self) -> None:
-        self.file.close()
+        """Close the file, writing the rows still in memory if it can: on the way out of a
+        failed run a failure to write loses only those rows and does not hide the error that
+        stopped the run (a finished run has written them with `write`)."""
+        try:
+            self.write()
+        except ParsphError:
+            pass
+        finally:
+            self.file.close()
 
 
 def read_history(path: str) -> dict:
