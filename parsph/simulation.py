@@ -214,6 +214,7 @@ class Simulation:
         self.broken = np.zeros(n, bool)  # failed particles (materials.damage), set at commits
         self.f_int = np.zeros((n, dim))
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
+        self.omega_hg2 = np.zeros(n if self.hourglass else 0)  # written by the forces stage
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
         self.hg_psi = np.zeros(n if variational else 0)
         self.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in self.bodies)
@@ -382,8 +383,8 @@ class Simulation:
         for b in self.bodies:  # in row order: the first particle with the smallest step
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
-                b.law.law_id, b.constants.values, self.dim, self.broken, ref.ptr, ref.idx, ref.dx, self.d, ref.hgc,
-                self.youngs, self.mass, b.formulation.hourglass_form)
+                b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
+                b.formulation.hourglass_form)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first

@@ -161,8 +161,9 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
 
     @njit(cache=True)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
-               volume, f_int, f_hg):
-        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg. With
+               volume, mass, f_int, f_hg, omega_hg2):
+        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and the
+        bound omega_hg2 on the hourglass springs' frequency (see `stable_time_step`). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -170,11 +171,13 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         source  # noqa: B018 - keys the disk cache to the source text
         pair_form = force_form == FORCE_PAIR
         xij = np.empty(dim)
+        stiffness = np.empty(6)  # of the hourglass springs: sum_j k_ij n n^T, or sum_j k_ij
         for i in range(lo, hi):
             for a in range(dim):
                 f_int[i, a] = 0.0
                 if hourglass != HOURGLASS_OFF:
                     f_hg[i, a] = 0.0
+            stiffness[:] = 0.0
             if force_form == FORCE_VIRTUAL_WORK:
                 for a in range(dim):
                     s = 0.0
@@ -227,6 +230,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
                         for a in range(dim):
                             f_hg[i, a] += c * xij[a]
+                        spring_tensor(stiffness, hgc[p] * (youngs[i] + youngs[j]) / r2, xij, dim)
                 elif hourglass == HOURGLASS_VARIATIONAL:
                     # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
                     for a in range(dim):
@@ -237,6 +241,12 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                             fi += fs[i, a, b] * dx[p, b]
                             fj += fs[j, a, b] * dx[p, b]
                         f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
+                    stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
+            if hourglass == HOURGLASS_PAPER:
+                omega_hg2[i] = 2.0 * _largest_eigenvalue(stiffness[0], stiffness[1], stiffness[2], stiffness[3],
+                                                         stiffness[4], stiffness[5], dim) / mass[i]
+            elif hourglass == HOURGLASS_VARIATIONAL:
+                omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
     variant = f"{_SOURCE_HASH} {dim} {law} {force_form} {hourglass} {updated} {hessian} {damaged}"
     return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
@@ -393,46 +403,21 @@ def _largest_eigenvalue(d00, d11, d22, d01, d12, d02, dim):
     return q + 2.0 * p * math.cos(math.acos(r) / 3.0)
 
 
-@njit(cache=True)
-def hourglass_frequency(i, ptr, idx, dx, d, hgc, youngs, mass, form, dim):
-    """omega_hg^2 of particle i: a bound on the stiffness of its hourglass springs under the
-    current moduli (a yielded particle's is its yield stress, [G §4.5]). Each pair is a
-    spring of stiffness k_ij = c_ij (E_i + E_j): along the current separation n_ij with
-    the paper's form (at most: the force has |x_ij| / (|x_ij| + 0.1 h_ij) of it), in every
-    direction with the variational one. As (n.(x_i - x_j))^2 <= 2 (n.x_i)^2 + 2 (n.x_j)^2, the largest
-    eigenvalue of M^-1 K is at most max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i:
-    about 1/dim of the scalar sum 2 sum_j k_ij / m_i on a disordered lattice, the same in
-    1D."""
-    if form == HOURGLASS_VARIATIONAL:
-        k = 0.0
-        for p in range(ptr[i], ptr[i + 1]):
-            k += hgc[p] * (youngs[i] + youngs[idx[p]])
-        return 2.0 * k / mass[i]
-    d00 = d11 = d22 = d01 = d12 = d02 = 0.0
-    x1 = x2 = 0.0
-    for p in range(ptr[i], ptr[i + 1]):
-        j = idx[p]
-        x0 = dx[p, 0] + d[j, 0] - d[i, 0]
-        if dim > 1:
-            x1 = dx[p, 1] + d[j, 1] - d[i, 1]
-        if dim > 2:
-            x2 = dx[p, 2] + d[j, 2] - d[i, 2]
-        r2 = x0 * x0 + x1 * x1 + x2 * x2
-        if not r2 > 0.0:
-            continue
-        k = hgc[p] * (youngs[i] + youngs[j]) / r2
-        d00 += k * x0 * x0
-        d11 += k * x1 * x1
-        d22 += k * x2 * x2
-        d01 += k * x0 * x1
-        d12 += k * x1 * x2
-        d02 += k * x0 * x2
-    return 2.0 * _largest_eigenvalue(d00, d11, d22, d01, d12, d02, dim) / mass[i]
+@njit(cache=True, inline="always")
+def spring_tensor(out, k, x, dim):
+    """Add k x x^T to the symmetric tensor out = (xx, yy, zz, xy, yz, xz)."""
+    out[0] += k * x[0] * x[0]
+    if dim > 1:
+        out[1] += k * x[1] * x[1]
+        out[3] += k * x[0] * x[1]
+    if dim > 2:
+        out[2] += k * x[2] * x[2]
+        out[4] += k * x[1] * x[2]
+        out[5] += k * x[0] * x[2]
 
 
 @njit(cache=True)
-def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken,
-                     ptr, idx, dx, d, hgc, youngs, mass, hourglass):
+def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
@@ -442,13 +427,19 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     (materials.update.stiffening, from the law's constants c) and times stab_i^(3/4), the
     stiffening by Hessian stabilisation (formulations.reference; the power measured on the
     updated cylinder and punch, where the square root overshot the stable step by up to
-    1.35x); omega_hg^2 from
-    `hourglass_frequency` with the body's hourglass form (HOURGLASS_OFF: none). The strain
-    max |ln s| over the principal stretches of fs is the distortion measure of the adaptive
-    reference update. In the total-Lagrangian formulation fs and F are the same array. Also
-    returns the first particle with the smallest step (-1 if there is none); the first
-    flattened or inverted particle i gives (0, inf, i). Failed particles (broken) are left
-    out: they carry no stress."""
+    1.35x). omega_hg^2 (with hourglass control) bounds the hourglass springs under the
+    current moduli (a yielded particle's is its yield stress, [G §4.5]), written by the
+    forces stage: each pair is a spring of stiffness at most k_ij = c_ij (E_i + E_j) along
+    the current separation n_ij with the paper's form (the force has |x_ij| / (|x_ij| +
+    0.1 h_ij) of it), in every direction with the variational one; as (n.(x_i - x_j))^2 <=
+    2 (n.x_i)^2 + 2 (n.x_j)^2, the largest eigenvalue of M^-1 K is at most
+    max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i, about 1/dim of the scalar sum
+    2 sum_j k_ij / m_i on a disordered lattice (the same in 1D). The strain max |ln s| over
+    the principal stretches of fs is the distortion measure of the adaptive reference
+    update. In the total-Lagrangian formulation fs and F are the same array. Also returns
+    the first particle with the smallest step (-1 if there is none); the first flattened or
+    inverted particle i gives (0, inf, i). Failed particles (broken) are left out: they
+    carry no stress."""
     dt = np.inf
     worst = 0.0
     smallest = -1
@@ -463,10 +454,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
             return 0.0, np.inf, i  # no stable step
         worst = max(worst, math.log(f_max), -math.log(f_min))
         w_el = 2.0 * wave_speed * math.sqrt(stiffening) * stab[i] ** 0.75 / length
-        w_hg2 = 0.0
-        if hourglass != HOURGLASS_OFF:
-            w_hg2 = hourglass_frequency(i, ptr, idx, dx, d, hgc, youngs, mass, hourglass, dim)
-        dt_i = 2.0 / math.sqrt(w_el * w_el + w_hg2)
+        dt_i = 2.0 / math.sqrt(w_el * w_el + (omega_hg2[i] if hourglass != HOURGLASS_OFF else 0.0))
         if dt_i < dt:
             dt, smallest = dt_i, i
     return dt, worst, smallest
