@@ -98,14 +98,13 @@ def _yield_integral(yield0, hardening, start, step):
 
 @njit(cache=True, inline="always")
 def _sandwich(A, B, out):
-    """out = A B A^T (3x3)."""
+    """out = A B A^T (3x3, B symmetric: so is out)."""
     for a in range(3):
-        for b in range(3):
-            s = 0.0
-            for k in range(3):
-                for m in range(3):
-                    s += A[a, k] * B[k, m] * A[b, m]
-            out[a, b] = s
+        ab0 = A[a, 0] * B[0, 0] + A[a, 1] * B[1, 0] + A[a, 2] * B[2, 0]
+        ab1 = A[a, 0] * B[0, 1] + A[a, 1] * B[1, 1] + A[a, 2] * B[2, 1]
+        ab2 = A[a, 0] * B[0, 2] + A[a, 1] * B[1, 2] + A[a, 2] * B[2, 2]
+        for b in range(a + 1):
+            out[a, b] = out[b, a] = ab0 * A[b, 0] + ab1 * A[b, 1] + ab2 * A[b, 2]
 
 
 @njit(cache=True)  # not inlined: the stages of the other laws do not compile it
@@ -147,21 +146,27 @@ def j2(F, dim, c, state, trial, i, P, work):
             dev[a] *= scale
     psi = mu * (dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2]) + 0.5 * bulk * theta * theta
     for a in range(3):
-        for b in range(3):
-            tau[a, b] = 0.0
-            be[a, b] = 0.0
-    for k in range(3):
-        tau_k = 2.0 * mu * dev[k] + bulk * theta
-        stretch2 = math.exp(2.0 * (dev[k] + theta / 3.0))
+        for b in range(a + 1):
+            s = 0.0
+            for k in range(3):
+                s += (2.0 * mu * dev[k] + bulk * theta) * N[a, k] * N[b, k]
+            tau[a, b] = tau[b, a] = s
+    if step > 0.0:  # the flow changes (C^p)^-1 = F^-1 b^e F^-T; an elastic step keeps it
+        for k in range(3):
+            eps[k] = math.exp(2.0 * (dev[k] + theta / 3.0))  # the elastic stretches squared
         for a in range(3):
-            for b in range(3):
-                nn = N[a, k] * N[b, k]
-                tau[a, b] += tau_k * nn
-                be[a, b] += stretch2 * nn
-    _sandwich(Finv, be, cp)  # (C^p)^-1 = F^-1 b^e F^-T
-    for k in range(6):
-        a, b = _PAIRS[k]
-        trial[i, k] = 0.5 * (cp[a, b] + cp[b, a])
+            for b in range(a + 1):
+                s = 0.0
+                for k in range(3):
+                    s += eps[k] * N[a, k] * N[b, k]
+                be[a, b] = be[b, a] = s
+        _sandwich(Finv, be, cp)
+        for k in range(6):
+            a, b = _PAIRS[k]
+            trial[i, k] = cp[a, b]
+    else:
+        for k in range(6):
+            trial[i, k] = state[i, k]
     trial[i, PLASTIC_STRAIN] = eps_bar + step
     trial[i, PLASTIC_WORK] = state[i, PLASTIC_WORK] + _yield_integral(yield0, hardening, eps_bar, step)
     for a in range(dim):
