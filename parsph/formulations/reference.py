@@ -89,7 +89,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     n = n_owned
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
-    idx = pairs.idx[:end].astype(np.int64)
+    idx = np.ascontiguousarray(pairs.idx[:end], dtype=np.int64)
     if np.isnan(ref.g_rev[:end]).any():
         raise ParsphError("internal: a neighbour of an owned particle has no reference row")
     rows = pairs.row_of_pair()[:end]
@@ -97,13 +97,9 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     if any(o.hourglass_form for o in options):
         hgc, hreg = np.zeros(end), np.zeros(end)
         for b, o in enumerate(options):
-            sel = np.flatnonzero(body[rows] == b)
-            if o.hourglass_form and len(sel):
-                hgc[sel], reg = tlsph.hourglass_coefficients(
-                    o.hourglass_form, rows[sel], idx[sel], ref.dx[sel], ref.w[sel], ref.h[sel], volume,
-                    measure, o.alpha)
-                if len(reg):
-                    hreg[sel] = reg
+            if o.hourglass_form:
+                tlsph.hourglass_coefficients(o.hourglass_form, ptr, idx, ref.dx, ref.w, ref.h, volume, measure,
+                                             float(o.alpha), body[:n], b, hgc, hreg)
     dim = X.shape[1]
     q = q_rev = np.zeros((0, dim))
     gh = gh_rev = np.zeros(0)

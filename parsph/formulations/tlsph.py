@@ -304,17 +304,27 @@ def stress_at(dim, law, updated, with_damage, i, fs, Fr, w, c, state, trial, dam
     return not (broken or (math.isfinite(e) and J[i] > 0.0))
 
 
-def hourglass_coefficients(form, rows, idx, dx, w, h, volume, measure, alpha: float):
-    """Per-pair hourglass coefficients c_ij and the regularising lengths 0.1 h_ij.
+@njit(cache=True)
+def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, body, b, hgc, hreg):
+    """Per-pair hourglass coefficients c_ij and (paper form) the regularising lengths
+    0.1 h_ij, written into hgc and hreg for the rows of body b.
 
     V_i is the particle's physical volume and V_j W_ij the kernel weight, which uses the
     d-dimensional measure (area in 2D, length in 1D) so that the force is in newtons.
     """
-    weight = volume[rows] * measure[idx] * w
-    dist2 = np.einsum("pa,pa->p", dx, dx)
-    if form == HOURGLASS_PAPER:
-        return 0.25 * alpha * weight / (dist2 + 0.01 * h * h), 0.1 * h
-    return VARIATIONAL_SCALE * 0.5 * alpha * weight / dist2, np.zeros(0)
+    for i in range(len(ptr) - 1):
+        if body[i] != b:
+            continue
+        for p in range(ptr[i], ptr[i + 1]):
+            weight = volume[i] * measure[idx[p]] * w[p]
+            dist2 = 0.0
+            for a in range(dx.shape[1]):
+                dist2 += dx[p, a] * dx[p, a]
+            if form == HOURGLASS_PAPER:
+                hgc[p] = 0.25 * alpha * weight / (dist2 + 0.01 * h[p] * h[p])
+                hreg[p] = 0.1 * h[p]
+            else:
+                hgc[p] = VARIATIONAL_SCALE * 0.5 * alpha * weight / dist2
 
 
 @njit(cache=True)

@@ -73,15 +73,25 @@ def _corrected_gradients(ptr, idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum):
 
 
 def reverse_index(pairs: Pairs, n: int) -> np.ndarray:
-    """For each pair p = (i, j), the index of the pair (j, i) in j's row, or -1 if j has no row."""
-    rows = pairs.row_of_pair()
-    key = rows * n + pairs.idx
-    order = np.argsort(key, kind="stable")
-    rev_key = pairs.idx * n + rows
-    pos = np.searchsorted(key[order], rev_key)
-    pos = np.minimum(pos, len(key) - 1)
-    found = key[order][pos] == rev_key if len(key) else np.zeros(0, bool)
-    return np.where(found, order[pos], -1)
+    """For each pair p = (i, j), the index of the pair (j, i) in j's row, or -1 if j has no
+    row (n: the number of particles the rows refer to)."""
+    rev = np.empty(len(pairs.idx), np.int64)
+    _reverse_index(pairs.ptr, pairs.idx, pairs.rows, rev)
+    return rev
+
+
+@njit(cache=True)
+def _reverse_index(ptr, idx, rows, rev):
+    """rev[p] for every pair of the rows: a scan of the neighbour's row, no temporaries."""
+    for i in range(rows):
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            rev[p] = -1
+            if j < rows:
+                for q in range(ptr[j], ptr[j + 1]):
+                    if idx[q] == i:
+                        rev[p] = q
+                        break
 
 
 def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
