@@ -40,8 +40,9 @@ LAWS = {"j2_plasticity": {"model": "j2_plasticity", "yield_stress": 1e6},
         "damage": {"failure_strain": 0.08}}  # over the elastic block's material
 
 
-def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0,
-          method: str = "tlsph", law: str = "") -> dict:
+def raw_block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0,
+              method: str = "tlsph", law: str = "") -> dict:
+    """The block's scene as written (tools/bench_versions.py hands it to two versions)."""
     side = round(particles ** (1 / dim))
     spacing = 1.0 / side
     raw = {
@@ -60,7 +61,12 @@ def block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, e
         raw["formulation"]["integration"] = "cells" if method.endswith("_cells") else "nodal"
     if method.endswith("_eulerian"):
         raw["formulation"]["kernel"] = "eulerian"
-    return config.validate(raw)
+    return raw
+
+
+def block(*args, **kwargs) -> dict:
+    """The block's scene, validated (raw_block's arguments)."""
+    return config.validate(raw_block(*args, **kwargs))
 
 
 def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph", law=""):

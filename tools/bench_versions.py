@@ -57,22 +57,6 @@ for line in sys.stdin:
 """
 
 
-def block(dim: int, particles: int, alpha: float, form: str, eta: float, every: int, method: str) -> dict:
-    """The raw scene of tools/bench_throughput.py's block (each version validates it)."""
-    side = round(particles ** (1 / dim))
-    return {
-        "scene": {"name": f"block{dim}d", "dimension": dim},
-        "geometry": {"parts": [{"shape": "box", "lower": [0.0] * dim, "upper": [1.0] * dim, "spacing": 1.0 / side}]},
-        "kernel": {"type": "cubic_spline", "support": 2.01},
-        "material": {"model": "saint_venant_kirchhoff", "density": 1000.0, "youngs_modulus": 1e9,
-                     "poisson_ratio": 0.3},
-        "formulation": {"hourglass": alpha, "hourglass_form": form, "hessian": eta,
-                        "type": "ulsph" if every else method.removesuffix("_cells"), "update_every": every,
-                        **({"integration": "cells"} if method.endswith("_cells") else {})},
-        "time": {"end": 1.0},
-    }
-
-
 def worker(tree: str):
     env = dict(os.environ, PYTHONPATH=tree)
     return subprocess.Popen([sys.executable, "-c", WORKER, tree], cwd=tree, env=env, text=True,
@@ -103,12 +87,13 @@ def main():
         print(f"old: {args.rev}, new: the working tree; {args.steps} steps per slice, {args.slices} slices each")
         print("case                                        old us   new us   new/old (median of slice ratios)")
         for dim, count in ((2, args.particles_2d), (3, args.particles_3d)):
-            for method, alpha, form, eta, every in bt.CASES:
-                scene = block(dim, count, alpha, form, eta, every, method)
+            for method, alpha, form, eta, every, *law in bt.CASES:
+                scene = bt.raw_block(dim, count, alpha, form, eta, every, method, *law)
                 old, new = worker(old_tree), worker(ROOT)
                 try:
                     a, b = ask(old, do="setup", scene=scene), ask(new, do="setup", scene=scene)
-                    label = f"{dim}D {method} alpha {alpha:g} {form if alpha else '-'} eta {eta:g} every {every}"
+                    label = (f"{dim}D {method}{' ' + law[0] if law else ''} alpha {alpha:g} {form if alpha else '-'} "
+                             f"eta {eta:g} every {every}")
                     if "error" in a or "error" in b:
                         print(f"{label:42s}  skipped ({a.get('error') or b.get('error')})")
                         continue

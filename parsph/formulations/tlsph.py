@@ -177,7 +177,9 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                 f_int[i, a] = 0.0
                 if hourglass != HOURGLASS_OFF:
                     f_hg[i, a] = 0.0
-            stiffness[:] = 0.0
+            if hourglass != HOURGLASS_OFF:
+                for a in range(6):
+                    stiffness[a] = 0.0
             if force_form == FORCE_VIRTUAL_WORK:
                 for a in range(dim):
                     s = 0.0
