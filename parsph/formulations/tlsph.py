@@ -62,6 +62,7 @@ _SOURCE_HASH = source_hash(__file__, elastic.__file__, elastoplastic.__file__, d
 
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # a symmetric tensor's components, in order
 # force rows: [G eq. 24] pair form, [V eq. 11] virtual work, and RLM [R Table 1]
 FORCE_PAIR, FORCE_VIRTUAL_WORK, FORCE_RLM = 0, 1, 2
 FORCE_FORMS = {"pair": FORCE_PAIR, "virtual_work": FORCE_VIRTUAL_WORK, "rlm": FORCE_RLM}
@@ -172,6 +173,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         pair_form = force_form == FORCE_PAIR
         xij = np.empty(dim)
         stiffness = np.empty(6)  # of the hourglass springs: sum_j k_ij n n^T, or sum_j k_ij
+        tensor = np.empty((3, 3))
         for i in range(lo, hi):
             for a in range(dim):
                 f_int[i, a] = 0.0
@@ -245,8 +247,10 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                         f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
                     stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
             if hourglass == HOURGLASS_PAPER:
-                omega_hg2[i] = 2.0 * _largest_eigenvalue(stiffness[0], stiffness[1], stiffness[2], stiffness[3],
-                                                         stiffness[4], stiffness[5], dim) / mass[i]
+                for k in range(6):
+                    a, b = _PAIRS[k]
+                    tensor[a, b] = tensor[b, a] = stiffness[k]
+                omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
             elif hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
@@ -371,53 +375,43 @@ def spacing_ratio(n, ptr, idx, x, measure, F, dim, out):
 
 
 @njit(cache=True)
+def symmetric_extremes(C, dim):
+    """(smallest, largest) eigenvalue of the symmetric positive semi-definite dim x dim
+    block of C (a 3x3 array; in 3D its diagonal is overwritten), in closed form."""
+    if dim == 1:
+        return C[0, 0], C[0, 0]
+    if dim == 2:
+        half = 0.5 * (C[0, 0] + C[1, 1])
+        root = math.sqrt(max(half * half - (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]), 0.0))
+        return half - root, half + root
+    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
+    off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
+    p = math.sqrt(((C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
+    if p < 1e-14 * q:  # (nearly) isotropic: also keeps p**3 from underflowing to zero
+        return q, q
+    for a in range(3):
+        C[a, a] -= q
+    r = max(-1.0, min(1.0, det(C, 3) / (2.0 * p ** 3)))
+    phi = math.acos(r) / 3.0
+    return q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
+
+
+@njit(cache=True)
 def principal_stretches(F, dim):
     """(smallest, largest) principal stretch of F: square roots of the extreme eigenvalues
-    of C = F^T F (closed form for a symmetric 2x2 or 3x3 matrix)."""
+    of C = F^T F."""
     if dim == 1:
         s = abs(F[0, 0])
         return s, s
     C = np.empty((3, 3))
     right_cauchy_green(F, dim, C)
-    if dim == 2:
-        half = 0.5 * (C[0, 0] + C[1, 1])
-        root = math.sqrt(max(half * half - (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]), 0.0))
-        return math.sqrt(max(half - root, 0.0)), math.sqrt(half + root)
-    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
-    off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
-    p = math.sqrt(((C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
-    if p < 1e-14 * q:  # (nearly) isotropic: also keeps p**3 from underflowing to zero
-        return math.sqrt(q), math.sqrt(q)
-    for a in range(3):
-        C[a, a] -= q
-    r = max(-1.0, min(1.0, det(C, 3) / (2.0 * p ** 3)))
-    phi = math.acos(r) / 3.0
-    largest = q + 2.0 * p * math.cos(phi)
-    smallest = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    smallest, largest = symmetric_extremes(C, dim)
     return math.sqrt(max(smallest, 0.0)), math.sqrt(max(largest, 0.0))
-
-
-@njit(cache=True)
-def _largest_eigenvalue(d00, d11, d22, d01, d12, d02, dim):
-    """Largest eigenvalue of the symmetric dim x dim matrix with these components (closed
-    form)."""
-    if dim == 1:
-        return d00
-    if dim == 2:
-        return 0.5 * (d00 + d11) + math.sqrt(0.25 * (d00 - d11) ** 2 + d01 * d01)
-    q = (d00 + d11 + d22) / 3.0
-    a, b, c = d00 - q, d11 - q, d22 - q
-    p = math.sqrt((a * a + b * b + c * c + 2.0 * (d01 * d01 + d12 * d12 + d02 * d02)) / 6.0)
-    if not p > 1e-14 * abs(q):
-        return q
-    det = a * (b * c - d12 * d12) - d01 * (d01 * c - d12 * d02) + d02 * (d01 * d12 - b * d02)
-    r = max(-1.0, min(1.0, det / (2.0 * p ** 3)))
-    return q + 2.0 * p * math.cos(math.acos(r) / 3.0)
 
 
 @njit(cache=True, inline="always")
 def spring_tensor(out, k, x, dim):
-    """Add k x x^T to the symmetric tensor out = (xx, yy, zz, xy, yz, xz)."""
+    """Add k x x^T to the symmetric tensor out = (xx, yy, zz, xy, yz, xz) (_PAIRS)."""
     out[0] += k * x[0] * x[0]
     if dim > 1:
         out[1] += k * x[1] * x[1]
