@@ -129,6 +129,7 @@ class Simulation:
         self.totals = {name: [Accumulator() for _ in self.bodies] for name in TOTALS}
         self.walls = Walls(scene["walls"], scene["tools"], dim)
         self._adopt(local)
+        self._check_hourglass_stiffness()
         n = self.n_owned
         if restart is None:
             with collective(comm):
@@ -242,7 +243,6 @@ class Simulation:
         efg = any(collocated(b.formulation) for b in self.bodies)
         self.collocation = BoundaryCollocation(self) if efg and self.scene["bc"] else None
         self.walls.select(self.groups)
-        self._check_hourglass_stiffness()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 
@@ -345,7 +345,7 @@ class Simulation:
 
     def _check_hourglass_stiffness(self) -> None:
         """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
-        frequency squared, overflows (an absurd formulation.hourglass)."""
+        frequency squared, overflows (an absurd formulation.hourglass). At set-up."""
         n, ref = self.n_owned, self.ref
         if not self.hourglass or not len(ref.idx):
             return
@@ -668,7 +668,6 @@ class Simulation:
                     b.formulation.build(self, b, self.scene["kernel"]["type"])
         if self.collocation:
             self.collocation = BoundaryCollocation(self)
-        self._check_hourglass_stiffness()
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 

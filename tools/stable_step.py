@@ -111,10 +111,11 @@ def measure(name: str, overrides: list, steps: int) -> dict:
     """The default step, how the default run fares, and the largest stable and accurate
     fixed steps."""
     start = time.perf_counter()
-    chosen = float(simulation(name, overrides).diagnostics()["dt"])
+    sim = simulation(name, overrides)
+    chosen = float(sim.diagnostics()["dt"])
     small = overrides + [f"time.cfl={REFERENCE_CFL}"]
     first = float(simulation(name, small).diagnostics()["dt"])
-    end = min(steps * first, simulation(name, overrides).scene["time"]["end"])
+    end = min(steps * first, sim.scene["time"]["end"])
     reference = run(name, small, end, None)
     default = verdict(name, overrides, end, None, reference)
     cache = {}

@@ -76,7 +76,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         candidates = find_pairs(X, support, gid, n_rows, skin)
         if len(options) > 1:
             candidates = within_bodies(candidates, body)
-        candidate_rev = reverse_index(candidates, len(X)) if skin > 0 else None
+        candidate_rev = reverse_index(candidates) if skin > 0 else None
     if candidate_rev is None:
         pairs = candidates
     else:  # the neighbours among the candidates, and their reverse pairs through the candidates'

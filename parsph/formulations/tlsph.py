@@ -56,13 +56,13 @@ from numba import njit
 from parsph.formulations.base import CompiledOnce, source_hash
 from parsph.materials import damage, elastic, elastoplastic, update
 from parsph.materials.elastic import det, right_cauchy_green
+from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
 
 
 _SOURCE_HASH = source_hash(__file__, elastic.__file__, elastoplastic.__file__, damage.__file__, update.__file__)
 
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
-_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # a symmetric tensor's components, in order
 # force rows: [G eq. 24] pair form, [V eq. 11] virtual work, and RLM [R Table 1]
 FORCE_PAIR, FORCE_VIRTUAL_WORK, FORCE_RLM = 0, 1, 2
 FORCE_FORMS = {"pair": FORCE_PAIR, "virtual_work": FORCE_VIRTUAL_WORK, "rlm": FORCE_RLM}
@@ -248,7 +248,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                     stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
             if hourglass == HOURGLASS_PAPER:
                 for k in range(6):
-                    a, b = _PAIRS[k]
+                    a, b = SYMMETRIC_PAIRS[k]
                     tensor[a, b] = tensor[b, a] = stiffness[k]
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
             elif hourglass == HOURGLASS_VARIATIONAL:
@@ -411,7 +411,7 @@ def principal_stretches(F, dim):
 
 @njit(cache=True, inline="always")
 def spring_tensor(out, k, x, dim):
-    """Add k x x^T to the symmetric tensor out = (xx, yy, zz, xy, yz, xz) (_PAIRS)."""
+    """Add k x x^T to the symmetric tensor out = (xx, yy, zz, xy, yz, xz), the order of SYMMETRIC_PAIRS."""
     out[0] += k * x[0] * x[0]
     if dim > 1:
         out[1] += k * x[1] * x[1]

@@ -72,9 +72,9 @@ def _corrected_gradients(ptr, idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum):
                 g_sum[i, a] += g[p, a]
 
 
-def reverse_index(pairs: Pairs, n: int) -> np.ndarray:
+def reverse_index(pairs: Pairs) -> np.ndarray:
     """For each pair p = (i, j), the index of the pair (j, i) in j's row, or -1 if j has no
-    row (n: the number of particles the rows refer to)."""
+    row."""
     rev = np.empty(len(pairs.idx), np.int64)
     _reverse_index(pairs.ptr, pairs.idx, pairs.rows, rev)
     return rev
@@ -150,7 +150,7 @@ def reference_pairs(
     g = np.empty_like(dx)
     g_sum = np.empty((rows, dim))
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
-    rev = reverse_index(pairs, len(positions)) if rev is None else rev
+    rev = reverse_index(pairs) if rev is None else rev
     g_rev = reverse_values(g, rev)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
                           rev=rev)

@@ -36,7 +36,7 @@ WORK = 7  # scratch 3x3 matrices of the update
 PLASTIC_STRAIN, PLASTIC_WORK = 6, 7
 _SQRT_3_2 = math.sqrt(1.5)
 _SQRT_6 = math.sqrt(6.0)
-_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
+SYMMETRIC_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # a symmetric tensor in 6 columns
 
 
 def initial_state(n: int) -> np.ndarray:
@@ -122,7 +122,7 @@ def j2(F, dim, c, state, trial, i, P, work):
         return math.nan
     inverse(F3, 3, Finv)
     for k in range(6):
-        a, b = _PAIRS[k]
+        a, b = SYMMETRIC_PAIRS[k]
         cp[a, b] = cp[b, a] = state[i, k]
     _sandwich(F3, cp, be)  # b^e trial = F (C^p)^-1 F^T
     symmetric_eigen(be, w, N)
@@ -162,7 +162,7 @@ def j2(F, dim, c, state, trial, i, P, work):
                 be[a, b] = be[b, a] = s
         _sandwich(Finv, be, cp)
         for k in range(6):
-            a, b = _PAIRS[k]
+            a, b = SYMMETRIC_PAIRS[k]
             trial[i, k] = cp[a, b]
     else:
         for k in range(6):
