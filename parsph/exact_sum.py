@@ -9,9 +9,10 @@ and a finite sum beyond the float range is +-inf). `allsum` adds the sums of all
 
 `Accumulator` gathers values in one compiled pass: each is x = M 2^(e-53) (frexp,
 |M| < 2^53), split as M = 2^26 hi + lo (|hi| <= 2^27, 0 <= lo < 2^26), and hi and lo are
-added to int64 sums per exponent, which cannot overflow within 2^35 values; the occupied
-exponents are shifted into Python ints when the sums are read (or that many values have
-been added). It serves both one-off sums (`sums`, `total`) and running totals.
+added to int64 sums per exponent, which cannot overflow within 2^35 values; when the sums
+are read (or that many values have been added) a compiled pass folds each column's
+exponents into one two's-complement integer that becomes a Python int. It serves both
+one-off sums (`sums`, `total`) and running totals.
 """
 
 from __future__ import annotations
@@ -66,12 +67,15 @@ class Exact:
 
 
 @njit(cache=True)
-def _deposit(values, buckets, special):
-    """Add each column of `values` (n, k) to its int64 sums per exponent `buckets`
-    (k, EXPONENTS, 2: hi, lo) or, if not finite, to `special` (k)."""
-    for i in range(values.shape[0]):
-        for c in range(values.shape[1]):
-            x = values[i, c]
+def _deposit(values, counts, buckets, span, special):
+    """Add `values` (1-D), counts[c] after counts[c - 1] to column c, to the int64 sums per
+    exponent `buckets` (columns, EXPONENTS, 2: hi, lo), widening the column's occupied
+    range `span` (columns, 2: first, last + 1), or, if not finite, to its `special`."""
+    i = 0
+    for c in range(len(counts)):
+        for _ in range(counts[c]):
+            x = values[i]
+            i += 1
             if not math.isfinite(x):
                 special[c] += x
                 continue
@@ -80,21 +84,46 @@ def _deposit(values, buckets, special):
             b = exponent + 1073
             buckets[c, b, 0] += m >> 26
             buckets[c, b, 1] += m & 67108863
+            span[c, 0] = min(span[c, 0], b)
+            span[c, 1] = max(span[c, 1], b + 1)
+
+
+LIMBS = 70  # 32-bit limbs of a column's bucket total: |total| < 2^(53 + 35 + 2097) < 2^(32 * 69)
 
 
 @njit(cache=True)
-def _take(buckets):
-    """Rows (column, exponent + 1073, hi sum, lo sum) of the occupied `buckets`, which
-    are emptied."""
-    out = np.empty((np.count_nonzero(buckets), 4), np.int64)
-    k = 0
+def _add_at(limbs, v, shift):
+    """Add v * 2^shift to `limbs` (int64 v; 32-bit limbs held in int64 with room for the
+    carries of every bucket), in pieces below 2^32 each."""
+    q, r = shift >> 5, shift & 31
+    low = (v & 4294967295) << r  # below 2^63
+    high = (v >> 32) << r  # |high| < 2^61
+    limbs[q] += low & 4294967295
+    limbs[q + 1] += (low >> 32) + (high & 4294967295)
+    limbs[q + 2] += high >> 32
+
+
+@njit(cache=True)
+def _fold(buckets, span):
+    """Each column's bucket total sum_b (2^26 hi_b + lo_b) 2^b over its occupied `span` as
+    little-endian two's complement bytes (columns, 4 LIMBS); the buckets are emptied."""
+    out = np.zeros((buckets.shape[0], 4 * LIMBS), np.uint8)
+    limbs = np.zeros(LIMBS, np.int64)
     for c in range(buckets.shape[0]):
-        for b in range(buckets.shape[1]):
-            if buckets[c, b, 0] != 0 or buckets[c, b, 1] != 0:
-                out[k, 0], out[k, 1], out[k, 2], out[k, 3] = c, b, buckets[c, b, 0], buckets[c, b, 1]
-                buckets[c, b, 0] = buckets[c, b, 1] = 0
-                k += 1
-    return out[:k]
+        limbs[:] = 0
+        for b in range(span[c, 0], span[c, 1]):
+            _add_at(limbs, buckets[c, b, 0], b + 26)
+            _add_at(limbs, buckets[c, b, 1], b)
+            buckets[c, b, 0] = buckets[c, b, 1] = 0
+        span[c, 0], span[c, 1] = EXPONENTS, 0
+        for i in range(LIMBS - 1):  # carries: limbs 0 .. LIMBS-2 in [0, 2^32), the top one 0 or -1
+            carry = limbs[i] >> 32
+            limbs[i] -= carry << 32
+            limbs[i + 1] += carry
+        for i in range(LIMBS):
+            for j in range(4):
+                out[c, 4 * i + j] = (limbs[i] >> (8 * j)) & 255
+    return out
 
 
 class Accumulator:
@@ -102,6 +131,7 @@ class Accumulator:
 
     def __init__(self, columns: int = 1):
         self.buckets = np.zeros((columns, EXPONENTS, 2), np.int64)
+        self.span = np.tile(np.array([EXPONENTS, 0], np.int64), (columns, 1))
         self.special = np.zeros(columns)
         self.units = [0] * columns  # in 2^-1126 = 2^-1074 / 2^52: every shift is >= 0
         self.pending = 0  # values per column in the int64 sums
@@ -109,16 +139,16 @@ class Accumulator:
     def add(self, values: np.ndarray) -> None:
         """Add the rows of `values` (n, columns), or of a 1-D array to a single column
         (at most LIMIT rows a call)."""
-        values = np.ascontiguousarray(values, dtype=np.float64).reshape(-1, len(self.units))
+        values = np.asarray(values, dtype=np.float64).reshape(-1, len(self.units))
         if self.pending + len(values) > LIMIT:
             self._collect()
-        _deposit(values, self.buckets, self.special)
+        _deposit(values.T.ravel(), np.full(values.shape[1], len(values)), self.buckets, self.span, self.special)
         self.pending += len(values)
 
     def _collect(self) -> None:
         """Move the int64 sums into the Python ints."""
-        for c, b, hi, lo in _take(self.buckets).tolist():
-            self.units[c] += ((hi << 26) + lo) << b
+        for c, folded in enumerate(_fold(self.buckets, self.span)):
+            self.units[c] += int.from_bytes(folded.tobytes(), "little", signed=True)
         self.pending = 0
 
     def sums(self) -> list:
@@ -129,22 +159,54 @@ class Accumulator:
     def set(self, sums: list) -> None:
         """Make the sums so far `sums` (Exact, one per column)."""
         self.buckets[:] = 0
+        self.span[:] = [EXPONENTS, 0]
         self.pending = 0
         self.units = [s.units << 52 for s in sums]
         self.special[:] = [s.special for s in sums]
 
 
+class _Scratch:
+    """Empty buckets for one-off sums, kept between calls (each fold empties what it used)."""
+
+    buckets = np.zeros((0, EXPONENTS, 2), np.int64)
+    span = np.zeros((0, 2), np.int64)
+
+    @classmethod
+    def take(cls, columns: int) -> tuple:
+        if len(cls.buckets) < columns:
+            cls.buckets = np.zeros((columns, EXPONENTS, 2), np.int64)
+            cls.span = np.tile(np.array([EXPONENTS, 0], np.int64), (columns, 1))
+        return cls.buckets[:columns], cls.span[:columns], np.zeros(columns)
+
+
+def totals(items: list) -> list:
+    """Exact sums of `items`: an Exact stays as it is, an array becomes the exact sum of its
+    elements, except a 2-D array (n, k): the k exact sums of its columns (in its place); the
+    arrays in one fold."""
+    columns = [column for x in items if not isinstance(x, Exact)
+               for column in (np.asarray(x, dtype=np.float64).T if np.ndim(x) == 2 else [np.ravel(x)])]
+    buckets, span, special = _Scratch.take(len(columns))
+    if columns:
+        _deposit(np.concatenate(columns), np.array([len(c) for c in columns], np.int64), buckets, span, special)
+    found = iter([Exact(int.from_bytes(f.tobytes(), "little", signed=True) >> 52, float(s))  # exact shift
+                  for f, s in zip(_fold(buckets, span), special)])
+    out = []
+    for x in items:
+        if isinstance(x, Exact):
+            out.append(x)
+        else:
+            out.extend(next(found) for _ in range(np.shape(x)[1] if np.ndim(x) == 2 else 1))
+    return out
+
+
 def sums(values: np.ndarray) -> list:
     """Exact sums of the columns of `values` (n, k), or of a 1-D array (one sum)."""
-    values = np.asarray(values)
-    acc = Accumulator(1 if values.ndim == 1 else values.shape[1])
-    acc.add(values)
-    return acc.sums()
+    return totals([values])
 
 
 def total(values: np.ndarray) -> Exact:
     """Exact sum of all elements of `values`."""
-    return sums(np.ravel(values))[0]
+    return totals([np.ravel(values)])[0]
 
 
 def allsum(comm, parts: list) -> list:
