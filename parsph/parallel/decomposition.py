@@ -320,8 +320,10 @@ class Decomposition:
         requests = []
         buffers = []
         for r, rows in recv.items():
-            count = rows.stop - rows.start if isinstance(rows, slice) else len(rows)
-            buf = np.empty((count,) + arr.shape[1:], arr.dtype)
+            if isinstance(rows, slice) and arr.flags.c_contiguous:  # received in place
+                requests.append(self.comm.Irecv(arr[rows], source=r, tag=7))
+                continue
+            buf = np.empty((len(rows),) + arr.shape[1:], arr.dtype)
             buffers.append((rows, buf))
             requests.append(self.comm.Irecv(buf, source=r, tag=7))
         sends = []
