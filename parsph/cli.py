@@ -38,6 +38,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress lines")
     r.add_argument("--debug", action="store_true",
                    help="check at every history row that no particle is lost or duplicated")
+    r.add_argument("--profile", action="store_true",
+                   help="report per stage the flops and bytes of a step against the core's peak and memory "
+                        "bandwidth, pairs and bytes per particle")
     c = sub.add_parser("check", help="validate a scene and print it resolved, with defaults")
     c.add_argument("scene")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -92,7 +95,8 @@ def main(argv=None) -> int:
         if args.command == "run":
             from parsph.run import run
 
-            return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart, args.debug)
+            return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart, args.debug,
+                       args.profile)
         elif args.command == "check":
             import json
 

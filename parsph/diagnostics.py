@@ -17,24 +17,77 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from mpi4py import MPI
+from numba import njit
 
-from parsph.exact_sum import allsum, sums, total
-
-
-def angular_momentum(x: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """x cross p of each particle: (n, 1) in 2D, (n, 3) in 3D, (n, 0) in 1D."""
-    if x.shape[1] == 2:
-        return (x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0])[:, None]
-    if x.shape[1] == 3:
-        return np.cross(x, p)
-    return np.zeros((len(x), 0))
+from parsph.exact_sum import SCALE, Exact, totals
 
 
-def probe_values(probes: list, state) -> dict:
-    """Each probe's value: the reduction of a particle quantity over its group."""
-    out = {}
-    comm = state.comm
+@njit(cache=True)
+def particle_columns(mass, v, X, u, eta):
+    """The per-particle terms of the row's sums, (n, 2 + 2 d + a): m eta^2, m, the kinetic
+    energy per component (m v_a^2 / 2), the momentum m v and the angular momentum x cross
+    m v (a = 1 component in 2D, 3 in 3D, none in 1D), x = X + u."""
+    n, dim = len(eta), v.shape[1]
+    turns = 1 if dim == 2 else (3 if dim == 3 else 0)
+    out = np.empty((n, 2 + 2 * dim + turns))
+    p = np.empty(dim)
+    x = np.empty(dim)
+    for i in range(n):
+        m = mass[i]
+        out[i, 0] = m * eta[i] * eta[i]
+        out[i, 1] = m
+        for a in range(dim):
+            p[a] = m * v[i, a]
+            x[a] = X[i, a] + u[i, a]
+            out[i, 2 + a] = 0.5 * m * v[i, a] * v[i, a]
+            out[i, 2 + dim + a] = p[a]
+        if dim == 2:
+            out[i, 2 + 2 * dim] = x[0] * p[1] - x[1] * p[0]
+        elif dim == 3:
+            out[i, 2 + 2 * dim] = x[1] * p[2] - x[2] * p[1]
+            out[i, 3 + 2 * dim] = x[2] * p[0] - x[0] * p[2]
+            out[i, 4 + 2 * dim] = x[0] * p[1] - x[1] * p[0]
+    return out
+
+
+class RowReduction:
+    """The parts of a history row that every rank contributes, reduced over the ranks in
+    one message: exact sums (exact_sum.Exact) and maxima. Each contributor adds its parts
+    and reads its results after `reduce` by the position `add_sums` / `add_max` returned."""
+
+    def __init__(self, comm):
+        self.comm = comm
+        self.items, self.count, self.maxima = [], 0, []
+        self.sums = []
+
+    def add_sums(self, items: list) -> int:
+        """Add exact sums (exact_sum.totals' items: Exact, or arrays summed locally at
+        `reduce`); returns the position of the first."""
+        first = self.count
+        self.items.extend(items)
+        self.count += sum(np.shape(x)[1] if np.ndim(x) == 2 else 1 for x in items)
+        return first
+
+    def add_max(self, values: list) -> int:
+        self.maxima.extend(float(v) for v in values)
+        return len(self.maxima) - len(values)
+
+    def reduce(self) -> None:
+        """Collective: the sums over all ranks (exact, the same on every rank count) and the
+        maxima."""
+        self.sums = totals(self.items)
+        if self.comm.size == 1:
+            return
+        gathered = self.comm.allgather(([(p.units, p.special) for p in self.sums], self.maxima))
+        self.sums = [Exact(sum(u for u, _ in column), sum(s for _, s in column))
+                     for column in zip(*(parts for parts, _ in gathered))]
+        self.maxima = np.max([maxima for _, maxima in gathered], axis=0).tolist() if self.maxima else []
+
+
+def probe_parts(probes: list, state, reduction: RowReduction):
+    """Each probe's part of the row: the reduction of a particle quantity over its group.
+    Returns the function that gives the probes' values once `reduction` is reduced."""
+    where = []
     for probe in probes:
         sel = state.group_index(probe["group"])
         q = state.quantity(probe["quantity"], sel)
@@ -42,72 +95,101 @@ def probe_values(probes: list, state) -> dict:
             q = np.linalg.norm(q, axis=1) if probe["component"] < 0 else q[:, probe["component"]]
         how = probe["reduce"]
         if how in ("mean", "sum"):
-            value = float(allsum(comm, [total(q)])[0])
-            out[probe["name"]] = value / comm.allreduce(len(q)) if how == "mean" else value
+            where.append(reduction.add_sums([q, Exact(len(q) * SCALE)]))
         elif how == "max":
-            out[probe["name"]] = comm.allreduce(q.max() if len(q) else -np.inf, op=MPI.MAX)
+            where.append(reduction.add_max([q.max() if len(q) else -np.inf]))
         else:
-            out[probe["name"]] = comm.allreduce(q.min() if len(q) else np.inf, op=MPI.MIN)
-    return out
+            where.append(reduction.add_max([-q.min() if len(q) else -np.inf]))
+
+    def values() -> dict:
+        out = {}
+        for probe, k in zip(probes, where):
+            how = probe["reduce"]
+            if how in ("mean", "sum"):
+                value, count = float(reduction.sums[k]), float(reduction.sums[k + 1])
+                out[probe["name"]] = value / count if how == "mean" else value
+            else:
+                out[probe["name"]] = reduction.maxima[k] if how == "max" else -reduction.maxima[k]
+        return out
+
+    return values
+
+
+def probe_values(probes: list, state) -> dict:
+    """Each probe's value (collective)."""
+    reduction = RowReduction(state.comm)
+    values = probe_parts(probes, state, reduction)
+    reduction.reduce()
+    return values()
+
+
+def global_parts(state, reduction: RowReduction):
+    """This rank's parts of the energies, momenta and disorder of all bodies together, and
+    with more than one body of each body's energies. Returns the function that gives them
+    as "NAME" and "NAME.BODY" once `reduction` is reduced."""
+    dim = state.dim
+    eta = state.disorder()
+    columns = particle_columns(state.mass, state.v, state.X, state.u, eta)
+    energies = state.energy_items()
+    bodies = state.bodies
+    keys = ("strain", "plastic", "damage", "viscous", "hourglass", "external")
+    start = reduction.add_sums([columns])
+    terms = {key: [(reduction.add_sums(body), len(body)) for body in energies[key]] for key in keys}
+    kinetic_at = reduction.add_sums([columns[b.lo:b.hi, 2:2 + dim] for b in bodies]) if len(bodies) > 1 else 0
+    top = reduction.add_max([eta.max() if len(eta) else 0.0])
+
+    def values() -> dict:
+        parts = reduction.sums
+        count = len(bodies)
+        weighted, mass, kinetic, momentum, angular = (
+            parts[start], parts[start + 1], parts[start + 2:start + 2 + dim],
+            parts[start + 2 + dim:start + 2 + 2 * dim], parts[start + 2 + 2 * dim:start + columns.shape[1]])
+        strain, plastic, damaged, viscous, hourglass, external = (
+            [sum(parts[k:k + size], Exact(0)) for k, size in terms[key]] for key in keys)
+        per_body_kinetic = parts[kinetic_at:kinetic_at + dim * count]
+        kinetic = sum(kinetic[1:], kinetic[0])
+        strain_all, plastic_all, damage_all, viscous_all, hourglass_all, external_all = (
+            sum(e[1:], e[0]) for e in (strain, plastic, damaged, viscous, hourglass, external))
+        out = {
+            "kinetic_energy": float(kinetic), "strain_energy": float(strain_all), "plastic_work": float(plastic_all),
+            "damage_work": float(damage_all), "viscous_work": float(viscous_all),
+            "hourglass_energy": float(hourglass_all), "external_work": float(external_all),
+            "total_energy": float(kinetic + strain_all + plastic_all + damage_all + viscous_all + hourglass_all
+                                  - external_all),
+            "disorder": math.sqrt(float(weighted) / float(mass)),
+            "disorder_max": reduction.maxima[top],
+        }
+        for a, name in enumerate("xyz"[:dim]):
+            out[f"momentum_{name}"] = float(momentum[a])
+        if dim == 2:
+            out["angular_momentum"] = float(angular[0])
+        for a, name in enumerate("xyz" if dim == 3 else ""):
+            out[f"angular_momentum_{name}"] = float(angular[a])
+        if count > 1:
+            for k, b in enumerate(bodies):
+                comps = per_body_kinetic[k * dim:(k + 1) * dim]
+                kin = sum(comps[1:], comps[0])
+                out[f"kinetic_energy.{b.name}"] = float(kin)
+                out[f"strain_energy.{b.name}"] = float(strain[k])
+                out[f"plastic_work.{b.name}"] = float(plastic[k])
+                out[f"damage_work.{b.name}"] = float(damaged[k])
+                out[f"viscous_work.{b.name}"] = float(viscous[k])
+                out[f"hourglass_energy.{b.name}"] = float(hourglass[k])
+                out[f"external_work.{b.name}"] = float(external[k])
+                out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + viscous[k]
+                                                      + hourglass[k] - external[k])
+        return out
+
+    return values
 
 
 def global_diagnostics(state) -> dict:
     """Energies, momenta and disorder of all bodies together, and with more than one body
     each body's energies as "NAME.BODY" (collective)."""
-    n, dim = state.n_owned, state.dim
-    m = state.mass[:n]
-    v = state.v[:n]
-    x = state.X[:n] + state.u[:n]
-    p = m[:, None] * v
-    eta = state.disorder()
-    # per-particle columns: m eta^2, m, kinetic energy per component, momentum, angular momentum
-    columns = np.column_stack([m * eta * eta, m, 0.5 * m[:, None] * v * v, p, angular_momentum(x, p)])
-    energies = state.energy_sums()
-    bodies = state.bodies
-    kinetic_parts = [sums(columns[b.lo:b.hi, 2:2 + dim]) for b in bodies] if len(bodies) > 1 else []
-    keys = ("strain", "plastic", "damage", "viscous", "hourglass", "external")
-    local = [*sums(columns), *(e for key in keys for e in energies[key]),
-             *(k for part in kinetic_parts for k in part)]
-    parts = allsum(state.comm, local)
-    count = len(bodies)
-    weighted, mass, kinetic = parts[0], parts[1], parts[2:2 + dim]
-    momentum, angular = parts[2 + dim:2 + 2 * dim], parts[2 + 2 * dim:columns.shape[1]]
-    rest = parts[columns.shape[1]:]
-    strain, plastic, damaged, viscous, hourglass, external = (rest[k * count:(k + 1) * count]
-                                                             for k in range(len(keys)))
-    per_body_kinetic = rest[len(keys) * count:]
-    kinetic = sum(kinetic[1:], kinetic[0])
-    strain_all, plastic_all, damage_all, viscous_all, hourglass_all, external_all = (
-        sum(e[1:], e[0]) for e in (strain, plastic, damaged, viscous, hourglass, external))
-    out = {
-        "kinetic_energy": float(kinetic), "strain_energy": float(strain_all), "plastic_work": float(plastic_all),
-        "damage_work": float(damage_all), "viscous_work": float(viscous_all), "hourglass_energy": float(hourglass_all),
-        "external_work": float(external_all),
-        "total_energy": float(kinetic + strain_all + plastic_all + damage_all + viscous_all + hourglass_all
-                              - external_all),
-        "disorder": math.sqrt(float(weighted) / float(mass)),
-        "disorder_max": state.comm.allreduce(eta.max() if len(eta) else 0.0, op=MPI.MAX),
-    }
-    for a, name in enumerate("xyz"[:dim]):
-        out[f"momentum_{name}"] = float(momentum[a])
-    if dim == 2:
-        out["angular_momentum"] = float(angular[0])
-    for a, name in enumerate("xyz" if dim == 3 else ""):
-        out[f"angular_momentum_{name}"] = float(angular[a])
-    if count > 1:
-        for k, b in enumerate(bodies):
-            comps = per_body_kinetic[k * dim:(k + 1) * dim]
-            kin = sum(comps[1:], comps[0])
-            out[f"kinetic_energy.{b.name}"] = float(kin)
-            out[f"strain_energy.{b.name}"] = float(strain[k])
-            out[f"plastic_work.{b.name}"] = float(plastic[k])
-            out[f"damage_work.{b.name}"] = float(damaged[k])
-            out[f"viscous_work.{b.name}"] = float(viscous[k])
-            out[f"hourglass_energy.{b.name}"] = float(hourglass[k])
-            out[f"external_work.{b.name}"] = float(external[k])
-            out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + viscous[k]
-                                                  + hourglass[k] - external[k])
-    return out
+    reduction = RowReduction(state.comm)
+    values = global_parts(state, reduction)
+    reduction.reduce()
+    return values()
 
 
 def check_particle_ids(state) -> None:

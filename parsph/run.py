@@ -16,7 +16,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import config, quantities
-from parsph.diagnostics import check_finite, check_particle_ids
+from parsph.diagnostics import RowReduction, check_finite, check_particle_ids
 from parsph.errors import InputError, ParsphError
 from parsph.io import checkpoint, output_dir
 from parsph.io.history import HistoryWriter, read_reached
@@ -74,12 +74,18 @@ class StopRequest:
             signal.signal(sig, handler)
 
 
-def report_stages(seconds: dict, steps: int, particles: int) -> None:
-    """Time per stage of the step (the slowest rank's), in ms per step and per cent."""
+def report_stages(seconds: dict, steps: int, profile=None, sim=None) -> None:
+    """Time per stage of the step (the slowest rank's), in ms per step and per cent; with a
+    `profile` (parsph.profile.Profile) of `sim`, a table of what each stage does with the
+    core. Collective."""
     names = sorted(COMM.allreduce(set(seconds), op=MPI.BOR) if COMM.size > 1 else seconds)
     worst = np.array([seconds.get(k, 0.0) for k in names])
     if COMM.size > 1:
         COMM.Allreduce(MPI.IN_PLACE, worst, op=MPI.MAX)
+    if profile is not None:
+        for line in profile.report(sim, dict(zip(names, worst.tolist())), steps):
+            say(line)
+        return
     total = worst.sum()
     parts = ", ".join(f"{k} {1e3 * v / steps:.3g} ms ({100 * v / total:.0f} %)" for k, v in zip(names, worst))
     say(f"parsph: per step: {parts}")
@@ -165,9 +171,10 @@ def continue_command(scene_path: str, out_dir: str, overrides: list) -> str:
 
 
 def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, quiet: bool,
-        restart: str | None = None, debug: bool = False) -> int:
+        restart: str | None = None, debug: bool = False, profile: bool = False) -> int:
     """Run a scene (or continue it from a checkpoint); returns the exit code. `debug` checks
-    at every history row that no particle was lost or duplicated."""
+    at every history row that no particle was lost or duplicated; `profile` reports what
+    each stage does with the core (parsph.profile) instead of its time alone."""
     # numpy's overflow warnings would only repeat, without saying where, what the run's own
     # checks report with the particle and step (stress evaluation, time step, history rows)
     np.seterr(over="ignore", invalid="ignore", divide="ignore")
@@ -205,16 +212,20 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     stop = StopRequest(scene["time"]["wall_limit"])
 
     def record() -> int:
+        """Collective: the history row of the present state, kept in memory; the rows are
+        written when rank 0 finds a write due (one reduction over the ranks carries its
+        answer with the row's sums)."""
         start = time.perf_counter()
         if debug:
             check_particle_ids(sim)
-        values = sim.diagnostics()
+        reduction = RowReduction(COMM)
+        due = reduction.add_max([history is not None and history.write_due()])
+        values = sim.diagnostics(reduction)
         check_finite(values, sim)
-        with collective():  # one agreement for the space check and the write
-            if history is not None:
-                output_dir.check_space(out_dir, history.row_bytes(len(values)),
-                                       f"the history row at step {sim.step_count}")
-                history.append(values)
+        if history is not None:
+            history.append(values)
+        if reduction.maxima[due]:
+            write_history()
         sim.stage_seconds["diagnostics+history"] += time.perf_counter() - start
         return sim.step_count
 
@@ -225,9 +236,11 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
 
     def write_history() -> None:
         """Collective: the history rows in memory to the file (a restart from the next
-        checkpoint finds every row up to it)."""
+        checkpoint finds every row up to it), if the disk has room for them."""
         with collective():
             if history is not None:
+                output_dir.check_space(out_dir, history.pending_bytes(),
+                                       f"the history rows up to step {sim.step_count}")
                 history.write()
 
     def save_checkpoint():
@@ -240,13 +253,21 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count
     stopped = 0
+    profiler = None
+    if profile:
+        from parsph.profile import Profile
+
+        profiler = Profile()
     try:
         if data is None:
             last = record()
             if out["snapshot_interval"] > 0:
                 snapshot()
         while sim.t < end and not (max_steps and sim.step_count >= max_steps):
-            dt = sim.step(end)
+            if profiler is not None and sim.step_count - steps_at_start == 2:
+                dt = profiler.record(sim, lambda: sim.step(end))
+            else:
+                dt = sim.step(end)
             progress.update(sim.step_count, sim.t, dt)
             if sim.step_count - steps_at_start == 10:
                 warn_if_endless(sim, end, max_steps, time.perf_counter() - loop_start, 10)
@@ -285,7 +306,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         say(f"parsph: {steps} steps to t = {sim.t:.6g} s in {loop_seconds:.2f} s: "
             f"{1e6 * loop_seconds * COMM.size / (steps * count):.3f} us per particle-step "
             f"(x {COMM.size} rank(s))")
-        report_stages(sim.stage_seconds, steps, count)
+        report_stages(sim.stage_seconds, steps, profiler if profiler and profiler.step else None, sim)
     if stopped:
         why = "the wall-clock limit" if stopped < 0 else signal.Signals(stopped).name
         say(f"parsph: stopped by {why} at step {sim.step_count}; checkpoint {path}; "

@@ -34,9 +34,9 @@ from mpi4py import MPI
 from parsph import config, fields, materials
 from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
 from parsph.collocation import BoundaryCollocation, collocated
-from parsph.diagnostics import global_diagnostics, probe_values
+from parsph.diagnostics import RowReduction, global_parts, probe_parts
 from parsph.errors import InputError, ParsphError
-from parsph.exact_sum import Accumulator, Exact, allsum, total
+from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
 from parsph.materials import damage, elastoplastic, update
@@ -138,17 +138,17 @@ class Simulation:
             self._prescribe_displacement(0.0)
             self._prescribe_velocity(0.0)
         else:
-            clock, totals = restart["clock"], restart["totals"]
+            clock, carried = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 for name, accs in self.totals.items():
-                    if name not in totals:  # a checkpoint from before this total existed: none so far
+                    if name not in carried:  # a checkpoint from before this total existed: none so far
                         continue
-                    saved = totals[name] if len(accs) > 1 else [totals[name]]
+                    saved = carried[name] if len(accs) > 1 else [carried[name]]
                     for acc, value in zip(accs, saved):
                         acc.set([Exact.from_json(value)])
-                self.walls.restore(totals["wall_force"])
+                self.walls.restore(carried["wall_force"])
         self._cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up, for messages
         self._floor = 0.0  # the smallest stable step allowed (time.step_floor), set below
         self.compute_forces()
@@ -590,7 +590,6 @@ class Simulation:
         steps, with lists and ghost layers a skin wider, and in between rebuilds the
         reference on the kept lists (_recommit): the same result as a search every step."""
         start = time.perf_counter()
-        n = self.n_owned
         for b in self.bodies:  # the penalty restarts at 0
             self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         if self.search_every > 1 and not self._search_due():
@@ -819,27 +818,37 @@ class Simulation:
         dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
         return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
 
-    def energy_sums(self) -> dict:
-        """This rank's parts of the energies of each body, exact: strain (sum V^0 psi of the
-        owned integration points), plastic work (sum V^0 w_p), damage work (the work the
-        particles have taken beyond their strain energy, sum V^0 (W - psi):
-        materials.damage), viscous work (absorbed by the artificial viscosity), hourglass
-        (the particles' penalty, or the work absorbed on this rank by the paper form, plus
+    def energy_items(self) -> dict:
+        """What this rank sums for the energies of each body (arrays, or exact_sum.Exact
+        running totals): strain (V^0 psi of the owned integration points), plastic work
+        (V^0 w_p), damage work (the work the particles have taken beyond their strain energy,
+        V^0 (W - psi): materials.damage), viscous work (absorbed by the artificial viscosity),
+        hourglass (the particles' penalty, the work absorbed on this rank by the paper form,
         the penalty released at reference updates) and external work."""
         out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "external": []}
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            out["strain"].append(total(b.formulation.integrated(self, b, lambda A: A["psi"])))
-            plastic = total(np.zeros(0)) if b.law.state != "plastic_state" else total(b.formulation.integrated(
-                self, b, lambda A: A["plastic_state_trial"][:, elastoplastic.PLASTIC_WORK]))
-            out["plastic"].append(plastic)
-            taken = np.zeros(0) if b.failure_strain is None else \
-                self.volume[lo:hi] * (self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi])
-            out["damage"].append(total(taken))
-            out["viscous"].append(acc["viscous_work"])
-            out["hourglass"].append(total(self.hg_psi[lo:hi]) + acc["hourglass_work"] + acc["hourglass_released"])
-            out["external"].append(acc["external_work"])
+            out["strain"].append([b.formulation.integrated(self, b, lambda A: A["psi"])])
+            out["plastic"].append([] if b.law.state != "plastic_state" else [b.formulation.integrated(
+                self, b, lambda A: A["plastic_state_trial"][:, elastoplastic.PLASTIC_WORK])])
+            out["damage"].append([] if b.failure_strain is None else
+                                 [self.volume[lo:hi] * (self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi])])
+            out["viscous"].append([acc["viscous_work"]])
+            out["hourglass"].append([self.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
+            out["external"].append([acc["external_work"]])
+        return out
+
+    def energy_sums(self) -> dict:
+        """This rank's parts of the energies of each body, exact (energy_items summed)."""
+        items = self.energy_items()
+        flat = totals([x for parts in items.values() for body in parts for x in body])
+        out, k = {}, 0
+        for key, parts in items.items():
+            out[key] = []
+            for body in parts:
+                out[key].append(sum(flat[k:k + len(body)], Exact(0)))
+                k += len(body)
         return out
 
     @property
@@ -860,14 +869,20 @@ class Simulation:
         sums = allsum(self.comm, self.walls.force_sums())
         return np.array([float(s) for s in sums]).reshape(len(self.walls.items), self.dim)
 
-    def diagnostics(self) -> dict:
-        """The history row: clock, global_diagnostics, obstacle forces and probes (collective)."""
+    def diagnostics(self, reduction: RowReduction | None = None) -> dict:
+        """The history row: clock, diagnostics.global_parts, obstacle forces and probes
+        (collective: one reduction over the ranks, `reduction` if given, holding what the
+        caller added)."""
+        reduction = reduction or RowReduction(self.comm)
+        energies = global_parts(self, reduction)
+        walls = reduction.add_sums(self.walls.contacts)  # obstacle-major, then component
+        probes = probe_parts(self.scene["probes"], self, reduction)
+        reduction.reduce()
         out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
                "reference_updates": float(self.updates)}
-        out.update(global_diagnostics(self))
-        if len(self.walls.items):
-            for label, f in zip(self.walls.names, self.wall_forces()):
-                for a, name in enumerate("xyz"[: self.dim]):
-                    out[f"{label}_force_{name}"] = f[a]
-        out.update(probe_values(self.scene["probes"], self))
+        out.update(energies())
+        for k, label in enumerate(self.walls.names):
+            for a, name in enumerate("xyz"[: self.dim]):
+                out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * self.dim + a])
+        out.update(probes())
         return out

@@ -15,43 +15,17 @@ usage: tools/memory.py [SCENE | PATH.toml] [--set KEY=VALUE ...]
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import resource
 
-import numpy as np
 from mpi4py import MPI
 
 from parsph import config
 from parsph.build import build_local
+from parsph.profile import arrays_held
 from parsph.simulation import Simulation
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-
-
-def arrays(obj, prefix: str, seen: set, out: list, depth: int = 0) -> None:
-    """(name, array) for every numpy array reachable from obj's attributes, dicts and
-    dataclass fields, two levels deep; `seen` holds the ids of the buffers counted."""
-    if depth > 2:
-        return
-    if isinstance(obj, np.ndarray):
-        base = obj if obj.base is None else obj.base
-        if id(base) not in seen and obj.nbytes:
-            seen.add(id(base))
-            out.append((prefix, obj))
-        return
-    if isinstance(obj, dict):
-        items = obj.items()
-    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        items = ((f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj))
-    elif hasattr(obj, "__dict__") and type(obj).__module__.startswith("parsph"):
-        items = vars(obj).items()
-    elif isinstance(obj, (list, tuple)):
-        items = ((str(k), v) for k, v in enumerate(obj))
-    else:
-        return
-    for name, value in items:
-        arrays(value, f"{prefix}.{name}" if prefix else str(name), seen, out, depth + 1)
 
 
 def main() -> None:
@@ -64,8 +38,7 @@ def main() -> None:
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     sim.step()
     n, rows, pairs = sim.n_owned, len(sim.X), len(sim.ref.idx)
-    found: list = []
-    arrays(sim, "", set(), found)
+    found = arrays_held(sim)
     table = {"particle": [], "pair": [], "other": []}
     for name, a in found:
         first = a.shape[0] if a.ndim else 0

@@ -1,11 +1,12 @@
 """`history.h5`: one resizable 1-D dataset per diagnostic and probe, one row per output time.
 
 Written by rank 0 (history values are already global reductions). Rows are kept in memory
-and written in blocks, each flushed: at least every WRITE_SECONDS of wall time, before every
-checkpoint (a restart finds every row up to it) and at the end, also of a failed run. A
-killed run leaves a readable file without at most the last WRITE_SECONDS of rows, which a
-restart from its checkpoint computes again. The resolved scene is stored as the attribute
-`scene`; every series carries its units as the attribute `units`.
+and written in blocks, each flushed: the first row at once, then at least every
+WRITE_SECONDS of wall time, before every checkpoint (a restart finds every row up to it)
+and at the end, also of a failed run. A killed run leaves a readable file without at most
+the last WRITE_SECONDS of rows, which a restart from its checkpoint computes again. The
+resolved scene is stored as the attribute `scene`; every series carries its units as the
+attribute `units`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 
 from parsph import quantities
 from parsph.errors import InputError, ParsphError
+from parsph.io.output_dir import check_space
 
 WRITE_SECONDS = 1.0  # the longest wall time a row waits in memory
 
@@ -52,19 +54,24 @@ class HistoryWriter:
         self.file = h5py.File(path, "w")
         self.file.attrs["scene"] = scene_json
 
-    def row_bytes(self, series: int) -> int:
-        """Bytes the rows in memory and one more of `series` values can add to the file (a
-        new chunk per series every 256 rows)."""
-        rows = len(self.pending) + 1
+    def pending_bytes(self) -> int:
+        """Bytes the rows in memory can add to the file, at most: per series a new chunk
+        every 256 rows and, for a series not yet in the file, its header and chunk index."""
+        rows = len(self.pending)
+        if not rows:
+            return 0
         chunks = (self.rows + rows - 1) // 256 - (self.rows - 1) // 256
-        return series * (64 * rows + 2048 * chunks)
+        new = sum(name not in self.series for name in self.pending[0])
+        return len(self.pending[0]) * 2048 * chunks + new * 4096
 
     def append(self, values: dict) -> None:
-        """Add one row: kept in memory, written with the others when WRITE_SECONDS have
-        passed since the last write."""
+        """Add one row, kept in memory until `write`."""
         self.pending.append(values)
-        if time.monotonic() - self.written_at >= WRITE_SECONDS:
-            self.write()
+
+    def write_due(self) -> bool:
+        """Whether WRITE_SECONDS have passed since the last write, or the file has no row
+        yet (the first row makes the series: later rows need little room)."""
+        return not self.rows or time.monotonic() - self.written_at >= WRITE_SECONDS
 
     def write(self) -> None:
         """Write the rows in memory to the file and flush it; a failure is a ParsphError
@@ -88,10 +95,12 @@ class HistoryWriter:
         self.rows, self.pending = end, []
 
     def close(self) -> None:
-        """Close the file, writing the rows still in memory if it can: on the way out of a
-        failed run a failure to write loses only those rows and does not hide the error that
-        stopped the run (a finished run has written them with `write`)."""
+        """Close the file, writing the rows still in memory if the disk has room for them: on
+        the way out of a failed run a failure to write loses only those rows and does not
+        hide the error that stopped the run (a finished run has written them with `write`)."""
         try:
+            check_space(os.path.dirname(self.path) or ".", self.pending_bytes(), "the history rows in memory",
+                        margin=0)  # the run has stopped: no other output is to follow
             self.write()
         except ParsphError:
             pass

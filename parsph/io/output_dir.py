@@ -124,13 +124,13 @@ def claim_output(out_dir: str, present: list) -> None:
                 say(f"replacing the previous run in {out_dir} (--overwrite)")
 
 
-def check_space(out_dir: str, nbytes: int, what: str) -> None:
-    """Raise OutputFull if the disk of `out_dir` has less than `nbytes` (plus a margin)
-    free, so that `what` is not written half-way (on the rank that writes)."""
+def check_space(out_dir: str, nbytes: int, what: str, margin: int = SPACE_MARGIN) -> None:
+    """Raise OutputFull if the disk of `out_dir` has less than `nbytes` plus `margin` free,
+    so that `what` is not written half-way (on the rank that writes)."""
     free = shutil.disk_usage(out_dir).free
-    if free < nbytes + SPACE_MARGIN:
+    if free < nbytes + margin:
         raise OutputFull(f"the disk holding {out_dir} is full: {what} needs about "
-                         f"{_size(nbytes + SPACE_MARGIN)}, {_size(free)} free")
+                         f"{_size(nbytes + margin)}, {_size(free)} free")
 
 
 def ensure_space(out_dir: str, nbytes: int, what: str) -> None:
