@@ -1,6 +1,6 @@
 """`parsph run --profile`: what each stage of the step does with the core.
 
-One step of the run (the third) is recorded: every call of a compiled kernel made from
+One step of the run (the first past half its time or steps) is recorded: every call of a compiled kernel made from
 Python (the stages', the stable step's, the integrator's) is logged with its arguments and
 the stage it serves. After that step, for each logged call:
 
@@ -32,7 +32,7 @@ from numba.core.registry import CPUDispatcher
 
 from parsph.formulations.base import CompiledOnce
 
-SAMPLE = 16  # particles whose flops are counted per call over a range
+SAMPLE = 64  # particles whose flops are counted per call over a range
 FULL_LIMIT = 20000  # float elements up to which a call not over a range is counted in full
 
 

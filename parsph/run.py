@@ -250,6 +250,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         return checkpoint.write_checkpoint(out_dir, sim, schedules, scene, out["checkpoint_keep"])
 
     last = -1 if data is None else sim.step_count
+    sim.stage_seconds.clear()  # the set-up's force evaluation (and compilation) is not a step
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count
     stopped = 0
@@ -264,7 +265,8 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
             if out["snapshot_interval"] > 0:
                 snapshot()
         while sim.t < end and not (max_steps and sim.step_count >= max_steps):
-            if profiler is not None and sim.step_count - steps_at_start == 2:
+            if profiler is not None and not profiler.step and (
+                    sim.t >= 0.5 * end or (max_steps and sim.step_count >= max_steps // 2)):  # half-way
                 dt = profiler.record(sim, lambda: sim.step(end))
             else:
                 dt = sim.step(end)

@@ -6,7 +6,7 @@ Venant-Kirchhoff, hourglass alpha = 50), stepped from a smooth velocity field wi
 time step. Reports, per rank count, the time to generate and partition the particles
 (build_local: each rank generates its own block), the whole set-up, the wall time per
 step, the time per step spent in the ghost (halo) exchange, the speed-up and the parallel
-efficiency.
+efficiency, and the largest rank's peak resident memory.
 The driver starts one MPI job per rank count (mpiexec) and runs them one after another.
 
 usage: tools/bench_scaling.py [--side 60] [--steps 50] [--ranks 1 2] [--json FILE]
@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -66,10 +67,11 @@ def worker(side: int, steps: int) -> None:
     comm.Barrier()
     seconds = time.perf_counter() - start
     halo = comm.allreduce(sim.stage_seconds["halo"], op=MPI.MAX)
+    peak = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3, op=MPI.MAX)
     counts = comm.gather(n, root=0)
     if comm.rank == 0:
         print(json.dumps({"ranks": comm.size, "particles": int(sum(counts)), "owned": counts,
-                          "build_s": build, "setup_s": setup, "step_ms": 1e3 * seconds / steps, "halo_ms": 1e3 * halo / steps,
+                          "build_s": build, "setup_s": setup, "step_ms": 1e3 * seconds / steps, "halo_ms": 1e3 * halo / steps, "peak_mb": peak,
                           "us_per_particle_step_core": 1e6 * seconds * comm.size / (steps * sum(counts))}))
 
 
@@ -96,12 +98,12 @@ def main() -> None:
         rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
     base = rows[0]["step_ms"] * rows[0]["ranks"]
     print(f"{'ranks':>5} {'particles':>10} {'build s':>8} {'set-up s':>9} {'ms/step':>9} {'halo ms':>8} {'speed-up':>9} "
-          f"{'efficiency':>10} {'us/particle-step/core':>22}")
+          f"{'efficiency':>10} {'us/particle-step/core':>22} {'peak MB/rank':>13}")
     for r in rows:
         r["speedup"] = base / r["step_ms"]
         r["efficiency"] = r["speedup"] / r["ranks"]
         print(f"{r['ranks']:5d} {r['particles']:10d} {r['build_s']:8.2f} {r['setup_s']:9.1f} {r['step_ms']:9.1f} {r['halo_ms']:8.2f} "
-              f"{r['speedup']:9.2f} {r['efficiency']:10.2f} {r['us_per_particle_step_core']:22.3f}")
+              f"{r['speedup']:9.2f} {r['efficiency']:10.2f} {r['us_per_particle_step_core']:22.3f} {r['peak_mb']:13.0f}")
     os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
     with open(args.json, "w") as fh:
         json.dump(rows, fh, indent=2)
