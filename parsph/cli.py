@@ -121,6 +121,12 @@ def main(argv=None) -> int:
                 print(plots.plot_history(args.file, args.names, args.output))
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader of the output (`| head`) has stopped reading
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        from parsph.errors import ParsphError
+        from parsph.parallel.runtime import COMM
+
+        return 141 if COMM.size == 1 else fail_all(ParsphError("its standard output was closed"))
     except BaseException as exc:  # noqa: BLE001 - every failure ends all ranks
         if isinstance(exc, SystemExit):
             raise

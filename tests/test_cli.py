@@ -17,7 +17,7 @@ from typing import Callable
 
 import pytest
 
-from conftest import BAR, RUNS, parsph
+from conftest import BAR, CEILING, ROOT, RUNS, parsph
 
 
 # A small 2D scene (random particles in a patch) for the "zero particles" count.
@@ -333,6 +333,20 @@ def test_check_prints_resolved_scene(ranks):
     assert scene["output"]["history_every"] == 10
     assert scene["bc"][0]["components"] == [0] and scene["bc"][0]["value"] == [0.0]
     assert scene["groups"]["all"] == {"all": True}
+
+
+def test_output_cut_off_by_its_reader_ends_quietly():
+    """`parsph check SCENE | head -1`: the pipe closes under the printing rank; the command
+    ends with the broken-pipe status (128 + SIGPIPE) and no traceback."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "parsph", "check", str(RUNS / "rings.toml")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    proc.stdout.close()  # the reader goes away before the scene is printed (imports take longer)
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=CEILING) == 141
+    assert "Traceback" not in stderr and stderr == "", stderr
 
 
 def test_check_applies_set(tmp_path):
