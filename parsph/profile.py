@@ -1,22 +1,22 @@
 """`parsph run --profile`: what each stage of the step does with the core.
 
-One step of the run (the first past half its time or steps) is recorded: every call of a compiled kernel made from
-Python (the stages', the stable step's, the integrator's) is logged with its arguments and
-the stage it serves. After that step, for each logged call:
+One step of the run (the first past half its time or steps) is recorded: every call of a
+compiled kernel made from Python (the stages', the stable step's, the integrator's) is
+logged with its arguments and the stage it serves. After that step, for each logged call:
 
 - bytes: the sizes of its array arguments, each buffer once: the traffic if the kernel
   streams each input and output once from memory (gathers of neighbours' values that miss
   the caches cost more, reuse from the caches less);
 - flops: counted, not modelled: the kernel's Python source is run on a sample of its
-  particles (calls over a range lo..hi of particles) or in full (small calls), with every
-  float read as a `Counted` value that counts each arithmetic operation and elementary
-  function done on it, the writes kept aside; the sample's count is scaled to the range.
+  particles (calls over a range lo..hi of particles) or in full (small calls), on the
+  arrays as the step left them, with every float read as a `Counted` value that counts each
+  arithmetic operation and elementary function done on it, the writes kept aside; the
+  sample's count is scaled to the range. Work done in numpy between kernels is not counted.
 
-The per-stage figures are set against this core's theoretical peak (the clock and vector
-width /proc/cpuinfo gives, one fused multiply-add unit pair) and its measured memory
-bandwidth (a compiled triad over arrays far beyond the caches). `report` adds pairs and
-bytes per particle (the arrays the simulation holds, `arrays_held`).
-"""
+The per-stage figures are set against this core's theoretical peak (its clock and vector
+width from /proc/cpuinfo, two fused multiply-add units) and its measured memory bandwidth
+(a compiled triad over arrays far beyond the caches). `report` adds pairs and bytes per
+particle (the arrays the simulation holds, `arrays_held`)."""
 
 from __future__ import annotations
 

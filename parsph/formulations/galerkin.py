@@ -39,15 +39,15 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from parsph import COMPILED_SOURCE
 from parsph.errors import InputError
 from parsph.fields import Field, register
-from parsph.formulations.base import CompiledOnce, Stage, source_hash
-from parsph.formulations import tlsph
+from parsph.formulations.base import CompiledOnce, Stage
 from parsph.formulations.reference import PairOptions
 from parsph.formulations.tlsph import gradient_row, stress_at
 from parsph.kernels.correction import MAX_CONDITION
 from parsph.kernels.functions import evaluate
-from parsph.materials import damage, elastic, elastoplastic, update
+from parsph.materials import update
 from parsph.relations import within_support
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
@@ -355,15 +355,11 @@ class GalerkinFormulation:
 
 
 # ------------------------------------------------------------------ compiled stages
-_SOURCE_HASH = source_hash(__file__, tlsph.__file__, elastic.__file__, elastoplastic.__file__, damage.__file__,
-                           update.__file__)
 
 
 def compile_stages(dim: int, law: int, updated: bool = False):
     """(kinematics_stress, forces) for one body's dimension, material law and reference
     (the initial one, or the updated one of the Eulerian kernel)."""
-    source = _SOURCE_HASH
-
     @njit(cache=True)
     def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi):
         """F = I + sum_J (d_J - d_base) (x) G_J, the stress, w P, J and psi at integration
@@ -371,7 +367,6 @@ def compile_stages(dim: int, law: int, updated: bool = False):
         (Eulerian kernel) that gradient is the motion fs from the reference, F = fs F^r, and
         the forces take V^0 P F^rT = V^r P^r [V eq. 14]; in the total-Lagrangian case fs and
         F are one array."""
-        source  # noqa: B018 - keys the disk cache to the source text
         P = np.empty((dim, dim))
         work = np.empty((update.WORK, 3, 3))
         undamaged = state[:, :0]  # damage is computed at particles only (config)
@@ -388,7 +383,6 @@ def compile_stages(dim: int, law: int, updated: bool = False):
     def forces(lo, hi, ptr, idx, g, VP, f_int):
         """f_I -= sum_q w_q P_q grad N_I(X_q) over one set of integration points, for
         particles lo..hi-1."""
-        source  # noqa: B018 - keys the disk cache to the source text
         for i in range(lo, hi):
             for p in range(ptr[i], ptr[i + 1]):
                 q = idx[p]
@@ -398,5 +392,5 @@ def compile_stages(dim: int, law: int, updated: bool = False):
                         s += VP[q, a, b] * g[p, b]
                     f_int[i, a] -= s
 
-    variant = f"{_SOURCE_HASH} {dim} {law} {updated}"
+    variant = f"{COMPILED_SOURCE} {dim} {law} {updated}"
     return CompiledOnce(kinematics_stress, variant), CompiledOnce(forces, variant)

@@ -53,14 +53,11 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.formulations.base import CompiledOnce, source_hash
-from parsph.materials import damage, elastic, elastoplastic, update
+from parsph import COMPILED_SOURCE
+from parsph.formulations.base import CompiledOnce
+from parsph.materials import damage, update
 from parsph.materials.elastic import det, right_cauchy_green
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
-
-
-_SOURCE_HASH = source_hash(__file__, elastic.__file__, elastoplastic.__file__, damage.__file__, update.__file__)
-
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
 # force rows: [G eq. 24] pair form, [V eq. 11] virtual work, and RLM [R Table 1]
@@ -88,12 +85,9 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
     `gradient` and `hessian_transpose` are the extra passes of Hessian's-difference
     stabilisation.
     """
-    source = _SOURCE_HASH
-
     @njit(cache=True)
     def gradient(lo, hi, ptr, idx, g, d, f):
         """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles lo..hi-1 [V eq. 12]."""
-        source  # noqa: B018 - keys the disk cache to the source text
         for i in range(lo, hi):
             gradient_row(dim, i, i, ptr, idx, g, d, f)
 
@@ -103,7 +97,6 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial) and (variational form)
         hourglass penalty hg_psi; returns the first inverted particle or -1."""
-        source  # noqa: B018 - keys the disk cache to the source text
         P = np.empty((dim, dim))
         work = np.empty((update.WORK, 3, 3))
         err = np.empty(dim)
@@ -149,7 +142,6 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
     def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
         """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
         [V eq. 21] feeds back into the forces."""
-        source  # noqa: B018 - keys the disk cache to the source text
         for i in range(lo, hi):
             for a in range(dim):
                 for b in range(dim):
@@ -169,7 +161,6 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
         uses particle i's correction for both terms and does not conserve linear momentum."""
-        source  # noqa: B018 - keys the disk cache to the source text
         pair_form = force_form == FORCE_PAIR
         xij = np.empty(dim)
         stiffness = np.empty(6)  # of the hourglass springs: sum_j k_ij n n^T, or sum_j k_ij
@@ -254,7 +245,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
             elif hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
-    variant = f"{_SOURCE_HASH} {dim} {law} {force_form} {hourglass} {updated} {hessian} {damaged}"
+    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {updated} {hessian} {damaged}"
     return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
 
 
