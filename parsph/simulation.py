@@ -158,6 +158,8 @@ class Simulation:
         self._stable_dt = restart["clock"]["dt"] if restart else self.stable_time_step()[0]
         self._first_stable = restart["clock"].get("first_stable", 0.0) if restart else self._stability()[0]
         self._floor = scene["time"]["step_floor"] * self._first_stable
+        # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
+        self.bound_hourglass = scene["time"]["dt"] == 0 or (self.updated and self.update_strain > 0)
 
     # ----------------------------------------------------------------- set-up helpers
     def _adopt(self, local: LocalBody) -> None:
@@ -216,6 +218,7 @@ class Simulation:
         self.f_int = np.zeros((n, dim))
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.omega_hg2 = np.zeros(n if self.hourglass else 0)  # written by the forces stage
+        self.bound_hourglass = True  # whether it is: the stable step is due after each force evaluation
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
         self.hg_psi = np.zeros(n if variational else 0)
         self.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in self.bodies)

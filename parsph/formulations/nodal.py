@@ -124,7 +124,7 @@ class NodalFormulation:
             ref = sim.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, sim.fs, sim.VP, sim.B, sim.youngs,
-                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.omega_hg2)
+                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.bound_hourglass, sim.omega_hg2)
         reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2")))

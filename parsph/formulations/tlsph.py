@@ -154,9 +154,10 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
 
     @njit(cache=True)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, omega_hg2):
-        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and the
-        bound omega_hg2 on the hourglass springs' frequency (see `stable_time_step`). With
+               volume, mass, f_int, f_hg, bound, omega_hg2):
+        """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
+        `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
+        frequency (see `stable_time_step`). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -225,7 +226,8 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
                         for a in range(dim):
                             f_hg[i, a] += c * xij[a]
-                        spring_tensor(stiffness, hgc[p] * (youngs[i] + youngs[j]) / r2, xij, dim)
+                        if bound:
+                            spring_tensor(stiffness, hgc[p] * (youngs[i] + youngs[j]) / r2, xij, dim)
                 elif hourglass == HOURGLASS_VARIATIONAL:
                     # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
                     for a in range(dim):
@@ -237,12 +239,12 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                             fj += fs[j, a, b] * dx[p, b]
                         f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
                     stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
-            if hourglass == HOURGLASS_PAPER:
+            if bound and hourglass == HOURGLASS_PAPER:
                 for k in range(6):
                     a, b = SYMMETRIC_PAIRS[k]
                     tensor[a, b] = tensor[b, a] = stiffness[k]
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
-            elif hourglass == HOURGLASS_VARIATIONAL:
+            elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
     variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {updated} {hessian} {damaged}"
