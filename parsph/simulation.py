@@ -769,7 +769,7 @@ class Simulation:
         """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
         out = np.empty(self.n_owned)
         ref = self.ref
-        tlsph.hourglass_error(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out)
+        tlsph.hourglass_error(self.dim)(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out)
         return out
 
     def spacing_ratio(self) -> np.ndarray:

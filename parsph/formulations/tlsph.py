@@ -326,25 +326,35 @@ def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, bod
                 hgc[p] = VARIATIONAL_SCALE * 0.5 * alpha * weight / dist2
 
 
-@njit(cache=True)
-def hourglass_error(n, ptr, idx, dx, w, u, F, out):
-    """Disorder measure per particle: the part of the neighbour separations that F does not
-    explain, relative to the separations themselves [G eq. 26],
+@functools.lru_cache(maxsize=None)
+def hourglass_error(dim: int):
+    """The disorder measure per particle for dimension `dim` (compiled for it: the loops over
+    components unrolled), a kernel (n, ptr, idx, dx, w, u, F, out): the part of the
+    neighbour separations that F does not explain, relative to the separations themselves
+    [G eq. 26],
         eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ).
     Zero for any affine motion; grows with hourglass modes and particle disorder."""
-    dim = dx.shape[1]
-    for i in range(n):
-        num = 0.0
-        den = 0.0
-        for p in range(ptr[i], ptr[i + 1]):
-            j = idx[p]
+
+    @njit(cache=True)
+    def kernel(n, ptr, idx, dx, w, u, F, out):
+        G = np.empty((3, 3))  # F_i - I
+        for i in range(n):
             for a in range(dim):
-                e = u[j, a] - u[i, a]
                 for b in range(dim):
-                    e -= (F[i, a, b] - (1.0 if a == b else 0.0)) * dx[p, b]
-                num += w[p] * e * e
-                den += w[p] * dx[p, a] * dx[p, a]
-        out[i] = math.sqrt(num / den) if den > 0 else 0.0
+                    G[a, b] = F[i, a, b] - (1.0 if a == b else 0.0)
+            num = 0.0
+            den = 0.0
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                for a in range(dim):
+                    e = u[j, a] - u[i, a]
+                    for b in range(dim):
+                        e -= G[a, b] * dx[p, b]
+                    num += w[p] * e * e
+                    den += w[p] * dx[p, a] * dx[p, a]
+            out[i] = math.sqrt(num / den) if den > 0 else 0.0
+
+    return kernel
 
 
 @njit(cache=True)
