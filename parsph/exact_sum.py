@@ -7,8 +7,8 @@ a sum, with the non-finite terms kept apart (their float sum: inf, -inf or nan);
 of it is the exact sum correctly rounded (what math.fsum returns; an exact zero is +0.0
 and a finite sum beyond the float range is +-inf). `allsum` adds the sums of all ranks.
 
-`Accumulator` gathers values in one compiled pass: each is x = M 2^(e-53) (frexp,
-|M| < 2^53), split as M = 2^26 hi + lo (|hi| <= 2^27, 0 <= lo < 2^26), and hi and lo are
+`Accumulator` gathers values in one compiled pass: each is x = M 2^(e-53) (M and e read
+from its bits, |M| < 2^53), split as M = 2^26 hi + lo (|hi| <= 2^27, 0 <= lo < 2^26), and hi and lo are
 added to int64 sums per exponent, which cannot overflow within 2^35 values; when the sums
 are read (or that many values have been added) a compiled pass folds each column's
 exponents into one two's-complement integer that becomes a Python int. It serves both
@@ -71,17 +71,27 @@ def _deposit(values, counts, buckets, span, special):
     """Add `values` (1-D), counts[c] after counts[c - 1] to column c, to the int64 sums per
     exponent `buckets` (columns, EXPONENTS, 2: hi, lo), widening the column's occupied
     range `span` (columns, 2: first, last + 1), or, if not finite, to its `special`."""
+    bits = values.view(np.int64)
     i = 0
     for c in range(len(counts)):
         for _ in range(counts[c]):
             x = values[i]
+            field = bits[i]
             i += 1
+            if x == 0.0:
+                continue
             if not math.isfinite(x):
                 special[c] += x
                 continue
-            mantissa, exponent = math.frexp(x)
-            m = np.int64(mantissa * 9007199254740992.0)  # 2^53 mantissa: exact
-            b = exponent + 1073
+            # x = m 2^(b - 1126) from its bits: m the significand (with the implicit bit of a
+            # normal number), b the biased exponent + 51 (52 for a subnormal)
+            biased = (field >> 52) & 2047
+            m = field & 4503599627370495
+            if biased > 0:
+                m += 4503599627370496
+            b = max(biased, 1) + 51
+            if field < 0:
+                m = -m
             buckets[c, b, 0] += m >> 26
             buckets[c, b, 1] += m & 67108863
             span[c, 0] = min(span[c, 0], b)
