@@ -106,6 +106,9 @@ class CountingArray:
         return tuple(int(k) for k in key)
 
     def __getitem__(self, key):
+        parts = key if isinstance(key, tuple) else (key,)
+        if any(isinstance(k, slice) for k in parts):  # a view: read through, its own writes
+            return CountingArray(self.base[self.prefix + parts])
         index = self._index(key)
         if len(index) < self.base.ndim:
             return CountingArray(self.base, index, self.writes)
