@@ -78,10 +78,10 @@ class RowReduction:
         self.sums = totals(self.items)
         if self.comm.size == 1:
             return
-        gathered = self.comm.allgather(([(p.units, p.special) for p in self.sums], self.maxima))
-        self.sums = [Exact(sum(u for u, _ in column), sum(s for _, s in column))
-                     for column in zip(*(parts for parts, _ in gathered))]
-        self.maxima = np.max([maxima for _, maxima in gathered], axis=0).tolist() if self.maxima else []
+        gathered = self.comm.allgather(([p.units for p in self.sums], [p.special for p in self.sums], self.maxima))
+        units, special, maxima = zip(*gathered)
+        self.sums = [Exact(sum(u), sum(s)) for u, s in zip(zip(*units), zip(*special))]
+        self.maxima = [math.nan if any(math.isnan(v) for v in m) else max(m) for m in zip(*maxima)]
 
 
 def probe_parts(probes: list, state, reduction: RowReduction):
