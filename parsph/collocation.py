@@ -22,8 +22,6 @@ the result does not depend on the number of ranks.
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import csc_matrix
-from scipy.sparse.linalg import splu
 
 from parsph.errors import InputError
 from parsph.parallel.runtime import collective
@@ -83,6 +81,9 @@ class _System:
         r = np.concatenate([e[0] for e in entries])
         c = np.concatenate([e[1] for e in entries])
         values = np.concatenate([e[2] for e in entries])
+        from scipy.sparse import csc_matrix  # here: scipy.sparse takes 0.05 s to import
+        from scipy.sparse.linalg import splu
+
         matrix = csc_matrix((values, (np.searchsorted(sorted_gids, r), np.searchsorted(sorted_gids, c))),
                             shape=(self.size, self.size))
         matrix.sort_indices()  # the same storage whatever order the ranks' rows came in

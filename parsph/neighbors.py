@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
 
 @dataclass
@@ -48,9 +47,7 @@ def find_pairs(positions: np.ndarray, support: np.ndarray, gid: np.ndarray, rows
     n = len(positions)
     if n == 0 or rows == 0:
         return Pairs(np.zeros(rows + 1, np.int64), np.zeros(0, np.int64))
-    tree = cKDTree(positions)
-    pairs = tree.query_pairs(r=float(support.max()) + skin, output_type="ndarray").astype(np.int64)
-    i, j = pairs[:, 0], pairs[:, 1]
+    i, j = close_pairs(positions, float(support.max()) + skin)
     sep = positions[j] - positions[i]
     dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
     keep = dist < 0.5 * (support[i] + support[j]) + skin
@@ -63,6 +60,95 @@ def find_pairs(positions: np.ndarray, support: np.ndarray, gid: np.ndarray, rows
     ptr = np.zeros(rows + 1, np.int64)
     np.cumsum(np.bincount(i, minlength=rows), out=ptr[1:])
     return Pairs(ptr, j)
+
+
+def kdtree(points: np.ndarray):
+    """scipy's k-d tree of `points`, imported on first use: the neighbour search of a run on
+    one rank needs none, and scipy.spatial takes a tenth of a second to import."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points)
+
+
+def close_pairs(x: np.ndarray, r: float) -> tuple:
+    """(i, j), i < j: every pair of points of x (n, d) at most r apart, and perhaps a few
+    more within a relative 1e-9 of r (callers test the distance themselves). A compiled
+    search over cells of size r; a cloud too wide for 2^20 cells per dimension goes to a
+    k-d tree."""
+    finite = r > 0 and bool(np.isfinite(x).all())
+    lower = x.min(axis=0) if finite else None
+    cells = np.floor((x.max(axis=0) - lower) / r).astype(np.int64) + 1 if finite else None
+    if not finite or cells.max() > 1 << 20:
+        pairs = kdtree(x).query_pairs(r=r, output_type="ndarray").astype(np.int64)
+        return pairs[:, 0], pairs[:, 1]
+    key = np.zeros(len(x), np.int64)
+    for a in range(x.shape[1]):  # row-major cell number
+        key = key * cells[a] + np.minimum(np.floor((x[:, a] - lower[a]) / r).astype(np.int64), cells[a] - 1)
+    order = np.argsort(key, kind="stable")
+    sorted_keys = key[order]
+    total = int(np.prod(cells))
+    # each cell's first point in `order`: a table over all cells if they are not too many
+    first = np.searchsorted(sorted_keys, np.arange(total + 1)) if total <= 8 * len(x) + 1024 else np.zeros(0, np.int64)
+    r2 = r * r * (1.0 + 1e-9)
+    counts = np.zeros(len(x), np.int64)
+    empty = np.zeros(0, np.int64)
+    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, counts, empty, empty)
+    start = np.zeros(len(x) + 1, np.int64)
+    np.cumsum(counts, out=start[1:])
+    i, j = np.empty(start[-1], np.int64), np.empty(start[-1], np.int64)
+    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, start, i, j)
+    return i, j
+
+
+@njit(cache=True)
+def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, where, i_out, j_out):
+    """For each point p, the points q > p in its cell and the adjacent ones with
+    |x_q - x_p|^2 <= r2: counted into where[p] (i_out empty), or written from where[p].
+    `first`: each cell's first position in `order` (all cells, and one past), or empty
+    (then found by bisection of sorted_keys)."""
+    n, dim = x.shape
+    fill = len(i_out) > 0
+    stride = np.ones(dim, np.int64)
+    for a in range(dim - 2, -1, -1):
+        stride[a] = stride[a + 1] * cells[a + 1]
+    cell = np.empty(dim, np.int64)
+    for s in range(n):  # in cell order: neighbouring points are near in memory
+        p = order[s]
+        rest = key[p]
+        for a in range(dim - 1, -1, -1):
+            cell[a] = rest % cells[a]
+            rest //= cells[a]
+        k = where[p] if fill else 0
+        for shift in range(3 ** dim):  # the 3^d cells around
+            code, t, inside = 0, shift, True
+            for a in range(dim):
+                c = cell[a] + t % 3 - 1
+                t //= 3
+                if c < 0 or c >= cells[a]:
+                    inside = False
+                    break
+                code += c * stride[a]
+            if not inside:
+                continue
+            if len(first):
+                m, end = first[code], first[code + 1]
+            else:
+                m = np.searchsorted(sorted_keys, code)
+                end = np.searchsorted(sorted_keys, code + 1)
+            for m in range(m, end):
+                q = order[m]
+                if q <= p:
+                    continue
+                d2 = 0.0
+                for a in range(dim):
+                    e = x[q, a] - x[p, a]
+                    d2 += e * e
+                if d2 <= r2:
+                    if fill:
+                        i_out[k], j_out[k] = p, q
+                    k += 1
+        if not fill:
+            where[p] = k
 
 
 def within_support(candidates: Pairs, positions: np.ndarray, support: np.ndarray) -> tuple:

@@ -14,7 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from parsph.neighbors import kdtree
 
 
 @dataclass
@@ -40,7 +41,7 @@ def within_support(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray,
     reach = float(support.max()) if len(support) else 0.0
     if n == 0 or len(x_cols) == 0:
         return Relation(rows, cols, np.zeros(n + 1, np.int64), np.zeros(0, np.int64))
-    near = cKDTree(x_rows).sparse_distance_matrix(cKDTree(x_cols), reach, output_type="ndarray")
+    near = kdtree(x_rows).sparse_distance_matrix(kdtree(x_cols), reach, output_type="ndarray")
     i, j = near["i"].astype(np.int64), near["j"].astype(np.int64)
     sep = x_cols[j] - x_rows[i]
     dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))

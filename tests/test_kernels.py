@@ -232,3 +232,23 @@ def test_evaluate_errors():
     with pytest.raises(ValueError):
         kf.get_kernel("nope")
     assert kf.get_kernel("spiky") is KERNELS["spiky"]
+
+
+@pytest.mark.parametrize("dim, count, r, spread", [(1, 200, 0.03, 1.0), (2, 800, 0.06, 1.0), (3, 1500, 0.15, 1.0),
+                                                    (2, 300, 1e-3, 1.0), (3, 200, 0.2, 1e4), (2, 100, 1e-7, 1.0)])
+def test_close_pairs_are_every_pair_within_the_radius(dim, count, r, spread):
+    """The cell search finds every pair at most r apart, once (i < j), against all pairs by
+    brute force; with the cells too many for a table (a sparse cloud), by bisection; with
+    too many cells per dimension, by a k-d tree."""
+    from parsph.neighbors import close_pairs
+
+    rng = np.random.default_rng(dim)
+    x = rng.random((count, dim)) * spread
+    x[:count // 2] = x[:count // 2] / spread  # a dense cluster and, with spread, a far sparse cloud
+    i, j = close_pairs(x, r)
+    found = set(zip(i.tolist(), j.tolist()))
+    d = np.linalg.norm(x[:, None, :] - x[None, :, :], axis=2)
+    a, b = np.nonzero(np.triu(d <= r, k=1))
+    assert set(zip(a.tolist(), b.tolist())) <= found
+    assert len(found) == len(i) and np.all(i < j)
+    assert np.all(d[i, j] <= r * (1 + 1e-9))

@@ -4,7 +4,8 @@ volume, and a union of bodies that drops coincident particles."""
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from parsph.neighbors import kdtree
 
 from .lattice import _check_count, _nonnegative, _positive, _ravel_first_fastest, _vector
 
@@ -130,7 +131,7 @@ def close_pairs(positions, others, reach):
     """Index arrays (i, j) and distances of the pairs of a point i of `positions` and a point
     j of `others` closer than `reach`."""
     if reach > 0.0 and len(positions) and len(others):
-        near = cKDTree(positions).sparse_distance_matrix(cKDTree(others), reach, output_type="ndarray")
+        near = kdtree(positions).sparse_distance_matrix(kdtree(others), reach, output_type="ndarray")
         near = near[near["v"] < reach]
         return near["i"], near["j"], near["v"]
     return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)

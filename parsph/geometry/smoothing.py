@@ -4,7 +4,8 @@
 import operator
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from parsph.neighbors import kdtree
 
 from .lattice import _positive
 
@@ -35,7 +36,7 @@ def support_for_neighbours(positions, target, others=None, reach=np.inf):
         raise ValueError(f"support_for_neighbours: target={target} needs at least {target + 2} "
                          f"positions, got {pos.shape[0]}")
     points = pos if others is None else np.concatenate([pos, others])
-    dist, _ = cKDTree(points).query(pos, k=target + 2, distance_upper_bound=reach)
+    dist, _ = kdtree(points).query(pos, k=target + 2, distance_upper_bound=reach)
     return 0.5 * (dist[:, target] + dist[:, target + 1])
 
 

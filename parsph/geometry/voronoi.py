@@ -6,7 +6,6 @@ import math
 import operator
 
 import numpy as np
-from scipy.spatial import Voronoi
 
 from .lattice import MAX_PARTICLES, _bounds
 
@@ -26,6 +25,8 @@ def _cells(points, lo, hi):
             m = points.copy()
             m[:, k] = 2.0 * face - m[:, k]
             mirrored.append(m)
+    from scipy.spatial import Voronoi  # here: scipy.spatial takes 0.1 s to import
+
     vor = Voronoi(np.concatenate(mirrored))
     owners = vor.ridge_points
     used = np.flatnonzero((owners < n).any(axis=1))

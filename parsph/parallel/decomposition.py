@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
-from scipy.spatial import cKDTree
+
+from parsph.neighbors import kdtree
 
 
 def _smallest(c: np.ndarray, ids: np.ndarray, target: int, comm) -> np.ndarray:
@@ -197,11 +198,11 @@ def add_ghosts(owned: dict, position: str, comm, also: np.ndarray | None = None,
     cand = nearby(owned, owned[position], 2.0 * reach, comm, region=x)
     layer1 = layer2 = np.zeros(0, np.int64)
     if len(x) and len(cand["gid"]):
-        dist1, _ = cKDTree(x).query(cand[position], distance_upper_bound=reach)
+        dist1, _ = kdtree(x).query(cand[position], distance_upper_bound=reach)
         layer1 = np.flatnonzero(np.isfinite(dist1))
         rest = np.flatnonzero(~np.isfinite(dist1))
         if len(layer1) and len(rest):
-            dist2, _ = cKDTree(cand[position][layer1]).query(cand[position][rest], distance_upper_bound=reach)
+            dist2, _ = kdtree(cand[position][layer1]).query(cand[position][rest], distance_upper_bound=reach)
             layer2 = rest[np.isfinite(dist2)]
     layer1 = layer1[np.lexsort((cand["gid"][layer1], cand["owner"][layer1]))]
     layer2 = layer2[np.argsort(cand["gid"][layer2], kind="stable")]
@@ -224,7 +225,7 @@ def add_set_ghosts(owned: dict, position: str, particles: np.ndarray, reach: flo
     cand = nearby(owned, owned[position], reach, comm, region=particles)
     ghost = np.zeros(0, np.int64)
     if len(particles) and len(cand["gid"]):
-        dist, _ = cKDTree(particles).query(cand[position], distance_upper_bound=reach)
+        dist, _ = kdtree(particles).query(cand[position], distance_upper_bound=reach)
         ghost = np.flatnonzero(np.isfinite(dist))
     ghost = ghost[np.lexsort((cand["gid"][ghost], cand["owner"][ghost]))]
     ghosts = _take(cand, ghost)

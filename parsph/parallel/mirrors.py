@@ -24,12 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from mpi4py import MPI
-from scipy.spatial import cKDTree
 
 from parsph import fields as registry
 from parsph.errors import InputError, ParsphError
+from parsph.neighbors import kdtree
 from parsph.parallel.decomposition import LocalBody
-
 
 
 @dataclass
@@ -106,12 +105,12 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
     image_x = sign * x[source] + offset
     layer1 = layer2 = np.zeros(0, np.int64)
     if n and len(source):
-        dist, _ = cKDTree(x[:n]).query(image_x, distance_upper_bound=reach)
+        dist, _ = kdtree(x[:n]).query(image_x, distance_upper_bound=reach)
         layer1 = np.flatnonzero(np.isfinite(dist))
         rest = np.flatnonzero(~np.isfinite(dist))
         inner = np.concatenate([x[n:n1], image_x[layer1]])
         if len(inner) and len(rest):
-            dist, _ = cKDTree(inner).query(image_x[rest], distance_upper_bound=reach)
+            dist, _ = kdtree(inner).query(image_x[rest], distance_upper_bound=reach)
             layer2 = rest[np.isfinite(dist)]
     layer1 = layer1[np.argsort(gid[layer1], kind="stable")]
     layer2 = layer2[np.argsort(gid[layer2], kind="stable")]
