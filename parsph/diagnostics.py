@@ -69,6 +69,8 @@ class RowReduction:
         return first
 
     def add_max(self, values: list) -> int:
+        """Add maxima over the ranks (a minimum as the maximum of its negation); returns the
+        position of the first."""
         self.maxima.extend(float(v) for v in values)
         return len(self.maxima) - len(values)
 
@@ -113,14 +115,6 @@ def probe_parts(probes: list, state, reduction: RowReduction):
         return out
 
     return values
-
-
-def probe_values(probes: list, state) -> dict:
-    """Each probe's value (collective)."""
-    reduction = RowReduction(state.comm)
-    values = probe_parts(probes, state, reduction)
-    reduction.reduce()
-    return values()
 
 
 def global_parts(state, reduction: RowReduction):
