@@ -364,6 +364,7 @@ def spacing_ratio(n, ptr, idx, x, measure, F, dim, out):
     the nearest current neighbour against the spacing the smooth deformation F (total)
     would give. At least about 1 for an affinely deformed lattice; particles that pair up or
     collapse onto each other drive it towards 0."""
+    C = np.empty((3, 3))
     for i in range(n):
         nearest = np.inf
         for p in range(ptr[i], ptr[i + 1]):
@@ -373,11 +374,11 @@ def spacing_ratio(n, ptr, idx, x, measure, F, dim, out):
                 e = x[j, a] - x[i, a]
                 r2 += e * e
             nearest = min(nearest, r2)
-        s_min = principal_stretches(F[i], dim)[0]
+        s_min = principal_stretches(F[i], dim, C)[0]
         out[i] = math.sqrt(nearest) / (measure[i] ** (1.0 / dim) * s_min) if s_min > 0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def symmetric_extremes(C, dim):
     """(smallest, largest) eigenvalue of the symmetric positive semi-definite dim x dim
     block of C (a 3x3 array; in 3D its diagonal is overwritten), in closed form."""
@@ -399,14 +400,13 @@ def symmetric_extremes(C, dim):
     return q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
 
 
-@njit(cache=True)
-def principal_stretches(F, dim):
+@njit(cache=True, _nrt=False)
+def principal_stretches(F, dim, C):
     """(smallest, largest) principal stretch of F: square roots of the extreme eigenvalues
-    of C = F^T F."""
+    of C = F^T F (C: 3x3 scratch)."""
     if dim == 1:
         s = abs(F[0, 0])
         return s, s
-    C = np.empty((3, 3))
     right_cauchy_green(F, dim, C)
     smallest, largest = symmetric_extremes(C, dim)
     return math.sqrt(max(smallest, 0.0)), math.sqrt(max(largest, 0.0))
@@ -452,11 +452,12 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     dt = np.inf
     worst = 0.0
     smallest = -1
+    C = np.empty((3, 3))
     for i in range(lo, hi):
         if broken[i]:  # failed (materials.damage): no stiffness
             continue
-        s_min, s_max = principal_stretches(F[i], dim)
-        f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim)
+        s_min, s_max = principal_stretches(F[i], dim, C)
+        f_min, f_max = (s_min, s_max) if fs is F else principal_stretches(fs[i], dim, C)
         stiffening = update.stiffening(law, s_max, J[i], c)
         length = min_spacing[i] * min(1.0, f_min)
         if not (length > 0.0 and stiffening < np.inf):

@@ -43,7 +43,7 @@ def initial_state(n: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)  # not inlined: stages without damage do not compile it
+@njit(cache=True, _nrt=False)  # not inlined: stages without damage do not compile it
 def degrade(P, F, dim, state, trial, i, work):
     """Scale the positive principal Cauchy stresses of P (at F, point i) by 1 - D from the
     committed state[i]; write trial[i] (the strain, W, P, F). `work`: 3x3 scratch matrices
@@ -80,7 +80,7 @@ def degrade(P, F, dim, state, trial, i, work):
     _record(P, F, dim, state, trial, i)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def failed(F, dim, state, trial, i, P):
     """A failed point (D = 1): P = 0, W completed for the step; returns its reported
     strain energy, 0."""

@@ -141,7 +141,7 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
     return 0.5 * mu * (jm23 * i1 - 3.0) + 0.5 * bulk * (J - 1.0) ** 2
 
 
-@njit(cache=True)  # not inlined: the stages of the other laws do not compile it
+@njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
 def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
     """[R eq. 18] (see stress): P = tau F^-T; out of the model's dimensions B is 1."""
     J = det(F, dim)
@@ -170,7 +170,7 @@ def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
     return 0.5 * c1 * (i1 - 3.0 * cube) + 0.5 * c2 * (i2 - 3.0 * cube * cube) + 0.25 * lam * ln_i3 * ln_i3
 
 
-@njit(cache=True)  # not inlined, as _mooney_rivlin
+@njit(cache=True, _nrt=False)  # not inlined, as _mooney_rivlin
 def _tait(F, dim, b, gamma, P, Finv):
     """[R eq. 77] (see stress)."""
     J = det(F, dim)

@@ -46,7 +46,7 @@ def initial_state(n: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def symmetric_eigen(A, w, V):
     """Eigenvalues w and unit eigenvectors (the columns of V) of the symmetric 3x3 matrix A
     (overwritten), by cyclic Jacobi rotations (deterministic, to rounding)."""
@@ -107,7 +107,7 @@ def _sandwich(A, B, out):
             out[a, b] = out[b, a] = ab0 * A[b, 0] + ab1 * A[b, 1] + ab2 * A[b, 2]
 
 
-@njit(cache=True)  # not inlined: the stages of the other laws do not compile it
+@njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
 def j2(F, dim, c, state, trial, i, P, work):
     """The return mapping at point i (see the module): reads the committed state[i], writes
     trial[i] and P; returns psi^e (NaN if J <= 0). `work`: (WORK, 3, 3) scratch."""
