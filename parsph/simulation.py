@@ -387,7 +387,7 @@ class Simulation:
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
                 b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
-                b.formulation.hourglass_form)
+                b.formulation.hourglass_form, np.empty((3, 3)))
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -769,7 +769,8 @@ class Simulation:
         """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
         out = np.empty(self.n_owned)
         ref = self.ref
-        tlsph.hourglass_error(self.dim)(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out)
+        tlsph.hourglass_error(self.dim)(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out,
+                                        np.empty((3, 3)))
         return out
 
     def spacing_ratio(self) -> np.ndarray:
@@ -778,7 +779,7 @@ class Simulation:
         out = np.empty(self.n_owned)
         ref = self.ref
         x = self.Xr + self.d if self.updated else self.X + self.u
-        tlsph.spacing_ratio(self.n_owned, ref.ptr, ref.idx, x, self.measure, self.F, self.dim, out)
+        tlsph.spacing_ratio(self.n_owned, ref.ptr, ref.idx, x, self.measure, self.F, self.dim, out, np.empty((3, 3)))
         return out
 
     def cauchy_stress(self, sel: np.ndarray, full: bool = False) -> np.ndarray:

@@ -300,11 +300,14 @@ class GalerkinFormulation:
         def displacement():  # from the updated reference, d = u - (X^r - X)
             np.subtract(sim.u[body.lo:body.hi], sim.shift[body.lo:body.hi], out=sim.d[body.lo:body.hi])
 
+        scratch = (np.empty((sim.dim, sim.dim)), np.empty((update.WORK, 3, 3)))  # the kernel's
+
         def kinematics_stress():
             for coupling, arrays, lo, hi, fail, weight, points in runs:
                 bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.d,
                                              weight, c, *sim.material_state(body, points), arrays["fs"],
-                                             arrays["F"], arrays["Fr"], arrays["VP"], arrays["J"], arrays["psi"])
+                                             arrays["F"], arrays["Fr"], arrays["VP"], arrays["J"], arrays["psi"],
+                                             *scratch)
                 if bad >= 0:
                     raise fail(bad)
 
@@ -360,15 +363,13 @@ class GalerkinFormulation:
 def compile_stages(dim: int, law: int, updated: bool = False):
     """(kinematics_stress, forces) for one body's dimension, material law and reference
     (the initial one, or the updated one of the Eulerian kernel)."""
-    @njit(cache=True)
-    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi):
+    @njit(cache=True, _nrt=False)
+    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi, P, work):
         """F = I + sum_J (d_J - d_base) (x) G_J, the stress, w P, J and psi at integration
         points lo..hi-1; returns the first inverted point or -1. With an updated reference
         (Eulerian kernel) that gradient is the motion fs from the reference, F = fs F^r, and
         the forces take V^0 P F^rT = V^r P^r [V eq. 14]; in the total-Lagrangian case fs and
-        F are one array."""
-        P = np.empty((dim, dim))
-        work = np.empty((update.WORK, 3, 3))
+        F are one array. P (dim x dim) and work (update.WORK x 3 x 3): scratch."""
         undamaged = state[:, :0]  # damage is computed at particles only (config)
         first_bad = -1
         for q in range(lo, hi):
@@ -379,7 +380,7 @@ def compile_stages(dim: int, law: int, updated: bool = False):
                 first_bad = q
         return first_bad
 
-    @njit(cache=True)
+    @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, VP, f_int):
         """f_I -= sum_q w_q P_q grad N_I(X_q) over one set of integration points, for
         particles lo..hi-1."""

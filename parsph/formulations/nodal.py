@@ -29,7 +29,7 @@ from parsph.fields import Field, register
 from parsph.formulations import tlsph
 from parsph.formulations.base import Stage
 from parsph.formulations.reference import PairOptions
-from parsph.materials import damage, elastoplastic
+from parsph.materials import damage, elastoplastic, update
 
 TYPES = ("tlsph", "ulsph", "sph", "rlm")
 
@@ -80,6 +80,9 @@ class NodalFormulation:
     def stages(self, sim, body) -> list:
         """The passes of one force evaluation over `body`'s owned particles of `sim`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
+        dim = sim.dim  # the kernels' scratch (they run without Numba's reference counting)
+        scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
+        force_scratch = (np.empty(dim), np.empty(6), np.empty((3, 3)))
         out = []
         if self.updated:
             def displacement():
@@ -109,7 +112,7 @@ class NodalFormulation:
             bad = self.kinematics_stress(
                 body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
                 sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
-                sim.fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi)
+                sim.fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch)
             if bad >= 0:
                 raise sim.unstable_particle(bad)
         out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
@@ -124,7 +127,8 @@ class NodalFormulation:
             ref = sim.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, sim.fs, sim.VP, sim.B, sim.youngs,
-                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.bound_hourglass, sim.omega_hg2)
+                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.bound_hourglass, sim.omega_hg2,
+                        *force_scratch)
         reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2")))

@@ -85,21 +85,18 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
     `gradient` and `hessian_transpose` are the extra passes of Hessian's-difference
     stabilisation.
     """
-    @njit(cache=True)
+    @njit(cache=True, _nrt=False)
     def gradient(lo, hi, ptr, idx, g, d, f):
         """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles lo..hi-1 [V eq. 12]."""
         for i in range(lo, hi):
             gradient_row(dim, i, i, ptr, idx, g, d, f)
 
-    @njit(cache=True)
+    @njit(cache=True, _nrt=False)
     def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
-                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi):
+                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial) and (variational form)
         hourglass penalty hg_psi; returns the first inverted particle or -1."""
-        P = np.empty((dim, dim))
-        work = np.empty((update.WORK, 3, 3))
-        err = np.empty(dim)
         first_bad = -1
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
@@ -138,7 +135,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                 hg_psi[i] = phi
         return first_bad
 
-    @njit(cache=True)
+    @njit(cache=True, _nrt=False)
     def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
         """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
         [V eq. 21] feeds back into the forces."""
@@ -152,9 +149,9 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                     for b in range(dim):
                         B[i, a, b] += VP[j, a, b] * gh_rev[p] - VP[i, a, b] * gh[p]
 
-    @njit(cache=True)
+    @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2):
+               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
         frequency (see `stable_time_step`). With
@@ -163,9 +160,6 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
         uses particle i's correction for both terms and does not conserve linear momentum."""
         pair_form = force_form == FORCE_PAIR
-        xij = np.empty(dim)
-        stiffness = np.empty(6)  # of the hourglass springs: sum_j k_ij n n^T, or sum_j k_ij
-        tensor = np.empty((3, 3))
         for i in range(lo, hi):
             for a in range(dim):
                 f_int[i, a] = 0.0
@@ -329,15 +323,14 @@ def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, bod
 @functools.lru_cache(maxsize=None)
 def hourglass_error(dim: int):
     """The disorder measure per particle for dimension `dim` (compiled for it: the loops over
-    components unrolled), a kernel (n, ptr, idx, dx, w, u, F, out): the part of the
+    components unrolled), a kernel (n, ptr, idx, dx, w, u, F, out, G): the part of the
     neighbour separations that F does not explain, relative to the separations themselves
     [G eq. 26],
         eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ).
     Zero for any affine motion; grows with hourglass modes and particle disorder."""
 
-    @njit(cache=True)
-    def kernel(n, ptr, idx, dx, w, u, F, out):
-        G = np.empty((3, 3))  # F_i - I
+    @njit(cache=True, _nrt=False)
+    def kernel(n, ptr, idx, dx, w, u, F, out, G):  # G: 3x3 scratch for F_i - I
         for i in range(n):
             for a in range(dim):
                 for b in range(dim):
@@ -357,14 +350,13 @@ def hourglass_error(dim: int):
     return kernel
 
 
-@njit(cache=True)
-def spacing_ratio(n, ptr, idx, x, measure, F, dim, out):
+@njit(cache=True, _nrt=False)
+def spacing_ratio(n, ptr, idx, x, measure, F, dim, out, C):
     """Particle disorder seen in the current configuration, for any formulation:
         r_i = min_j |x_j - x_i| / (measure_i^(1/d) s_min(F_i)),
     the nearest current neighbour against the spacing the smooth deformation F (total)
     would give. At least about 1 for an affinely deformed lattice; particles that pair up or
-    collapse onto each other drive it towards 0."""
-    C = np.empty((3, 3))
+    collapse onto each other drive it towards 0. C: 3x3 scratch."""
     for i in range(n):
         nearest = np.inf
         for p in range(ptr[i], ptr[i + 1]):
@@ -425,8 +417,8 @@ def spring_tensor(out, k, x, dim):
         out[5] += k * x[0] * x[2]
 
 
-@njit(cache=True)
-def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass):
+@njit(cache=True, _nrt=False)
+def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass, C):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
@@ -448,11 +440,10 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     update. In the total-Lagrangian formulation fs and F are the same array. Also returns
     the first particle with the smallest step (-1 if there is none); the first flattened or
     inverted particle i gives (0, inf, i). Failed particles (broken) are left out: they
-    carry no stress."""
+    carry no stress. C: 3x3 scratch."""
     dt = np.inf
     worst = 0.0
     smallest = -1
-    C = np.empty((3, 3))
     for i in range(lo, hi):
         if broken[i]:  # failed (materials.damage): no stiffness
             continue
@@ -470,7 +461,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     return dt, worst, smallest
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
                          f_visc):
     """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
