@@ -8,8 +8,8 @@ of it is the exact sum correctly rounded (what math.fsum returns; an exact zero 
 and a finite sum beyond the float range is +-inf). `allsum` adds the sums of all ranks.
 
 `Accumulator` gathers values in one compiled pass: each is x = M 2^(e-53) (M and e read
-from its bits, |M| < 2^53), split as M = 2^26 hi + lo (|hi| <= 2^27, 0 <= lo < 2^26), and hi and lo are
-added to int64 sums per exponent, which cannot overflow within 2^35 values; when the sums
+from its bits, |M| < 2^53), split as M = 2^26 hi + lo (|hi| <= 2^27, 0 <= lo < 2^26), and
+hi and lo are added to int64 sums per exponent, which cannot overflow within 2^35 values; when the sums
 are read (or that many values have been added) a compiled pass folds each column's
 exponents into one two's-complement integer that becomes a Python int. It serves both
 one-off sums (`sums`, `total`) and running totals.
@@ -136,6 +136,11 @@ def _fold(buckets, span):
     return out
 
 
+def _folded(buckets, span) -> list:
+    """_fold's column totals as Python ints (in 2^-1126 units); the buckets are emptied."""
+    return [int.from_bytes(f.tobytes(), "little", signed=True) for f in _fold(buckets, span)]
+
+
 class Accumulator:
     """Running exact sums of `columns` columns of values."""
 
@@ -157,8 +162,8 @@ class Accumulator:
 
     def _collect(self) -> None:
         """Move the int64 sums into the Python ints."""
-        for c, folded in enumerate(_fold(self.buckets, self.span)):
-            self.units[c] += int.from_bytes(folded.tobytes(), "little", signed=True)
+        for c, units in enumerate(_folded(self.buckets, self.span)):
+            self.units[c] += units
         self.pending = 0
 
     def sums(self) -> list:
@@ -198,8 +203,7 @@ def totals(items: list) -> list:
     buckets, span, special = _Scratch.take(len(columns))
     if columns:
         _deposit(np.concatenate(columns), np.array([len(c) for c in columns], np.int64), buckets, span, special)
-    found = iter([Exact(int.from_bytes(f.tobytes(), "little", signed=True) >> 52, float(s))  # exact shift
-                  for f, s in zip(_fold(buckets, span), special)])
+    found = iter([Exact(units >> 52, float(s)) for units, s in zip(_folded(buckets, span), special)])  # exact shift
     out = []
     for x in items:
         if isinstance(x, Exact):

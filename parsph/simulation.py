@@ -219,6 +219,7 @@ class Simulation:
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.omega_hg2 = np.zeros(n if self.hourglass else 0)  # written by the forces stage
         self.bound_hourglass = True  # whether it is: the stable step is due after each force evaluation
+        self.scratch33 = np.empty((3, 3))  # of the kernels of the stable step and the read-outs
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
         self.hg_psi = np.zeros(n if variational else 0)
         self.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in self.bodies)
@@ -387,7 +388,7 @@ class Simulation:
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
                 b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
-                b.formulation.hourglass_form, np.empty((3, 3)))
+                b.formulation.hourglass_form, self.scratch33)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -770,7 +771,7 @@ class Simulation:
         out = np.empty(self.n_owned)
         ref = self.ref
         tlsph.hourglass_error(self.dim)(self.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, self.d, self.fs, out,
-                                        np.empty((3, 3)))
+                                        self.scratch33)
         return out
 
     def spacing_ratio(self) -> np.ndarray:
@@ -779,7 +780,7 @@ class Simulation:
         out = np.empty(self.n_owned)
         ref = self.ref
         x = self.Xr + self.d if self.updated else self.X + self.u
-        tlsph.spacing_ratio(self.n_owned, ref.ptr, ref.idx, x, self.measure, self.F, self.dim, out, np.empty((3, 3)))
+        tlsph.spacing_ratio(self.n_owned, ref.ptr, ref.idx, x, self.measure, self.F, self.dim, out, self.scratch33)
         return out
 
     def cauchy_stress(self, sel: np.ndarray, full: bool = False) -> np.ndarray:
@@ -845,15 +846,7 @@ class Simulation:
 
     def energy_sums(self) -> dict:
         """This rank's parts of the energies of each body, exact (energy_items summed)."""
-        items = self.energy_items()
-        flat = totals([x for parts in items.values() for body in parts for x in body])
-        out, k = {}, 0
-        for key, parts in items.items():
-            out[key] = []
-            for body in parts:
-                out[key].append(sum(flat[k:k + len(body)], Exact(0)))
-                k += len(body)
-        return out
+        return {key: [sum(totals(body), Exact(0)) for body in parts] for key, parts in self.energy_items().items()}
 
     @property
     def strain_energy_local(self) -> float:
