@@ -293,9 +293,16 @@ PROBE_KEYS = {
     "component": Key("int", -1, doc="vector component, -1 for the norm / scalar quantities"),
     "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
 }
+CONTACT_KEYS = {
+    "bodies": Key("strlist", REQUIRED, doc="the names of the two bodies that touch (parsph.contact)"),
+    "radius": Key("float", 1.0, positive,
+                  "contact radius of a particle over half its spacing: two particles touch when their "
+                  "centres are closer than the mean of their spacings times this (at most the kernel "
+                  "support)"),
+}
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
-                               "initial", "probes", "bodies")
+                               "initial", "probes", "bodies", "contact")
 
 
 def _suggest(name: str, known) -> str:
@@ -810,8 +817,46 @@ def validate(raw: dict) -> dict:
     for b, body in enumerate(bodies(scene)):
         if body["formulation"]["type"] in ("kbm", "efg"):
             _check_integration_points(body, f"bodies[{b}]" if multi else "geometry", scene)
+    if "contact" in raw:
+        scene["contact"] = _validate_contact(raw["contact"], scene, dim)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
+
+
+def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
+    """The [[contact]] tables: two distinct bodies of the scene each, every pair once, one
+    radius per body, no symmetry planes."""
+    names = [b["name"] for b in bodies(scene)] if "bodies" in scene else []
+    out, seen, radius = [], set(), {}
+    for i, t in enumerate(_array("contact", raw)):
+        path = f"contact[{i}]"
+        item = _table(path, t, CONTACT_KEYS, dim)
+        pair = item["bodies"]
+        if len(pair) != 2:
+            raise InputError(f"{path}.bodies must name two bodies, got {pair!r}")
+        for name in pair:
+            if name not in names:
+                raise InputError(f"{path}.bodies names body '{name}', which is not defined"
+                                 f"{_suggest(name, names) if names else ' (contact needs [[bodies]])'}")
+        if pair[0] == pair[1]:
+            raise InputError(f"{path}.bodies: contact of body '{pair[0]}' with itself (self-contact) is not "
+                             "supported: name two different bodies")
+        if frozenset(pair) in seen:
+            raise InputError(f"{path}.bodies: bodies '{pair[0]}' and '{pair[1]}' are paired twice")
+        seen.add(frozenset(pair))
+        if item["radius"] > scene["kernel"]["support"]:
+            raise InputError(f"{path}.radius = {item['radius']:g} exceeds kernel.support = "
+                             f"{scene['kernel']['support']:g}: a contact radius larger than the kernel's support "
+                             "would push apart particles that do not overlap")
+        for name in pair:
+            if radius.setdefault(name, item["radius"]) != item["radius"]:
+                raise InputError(f"{path}.radius = {item['radius']:g}: body '{name}' has contact radius "
+                                 f"{radius[name]:g} in an earlier [[contact]]; give it one radius")
+        out.append(item)
+    if out and scene["symmetry"]:
+        raise InputError("[[contact]] with [[symmetry]] planes is not supported: the mirror images do not "
+                         "take part in contact; model both sides")
+    return out
 
 
 def search_every(form: dict) -> int:

@@ -40,6 +40,8 @@ _BUILT_IN = (
     Quantity("plastic_strain", "scalar", "1", doc="equivalent plastic strain (0 for elastic laws)"),
     Quantity("plastic_work", "scalar", "J/m^3", doc="plastic work per unit reference volume"),
     Quantity("damage", "scalar", "1", doc="tensile damage D (0 without damage)"),
+    Quantity("contact_force", "vector", "N", doc="force from other bodies' particles (parsph.contact)"),
+    Quantity("body", "scalar", "1", probe=False, doc="index of the particle's body, in the scene's order"),
 )
 BUILT_IN = {q.name: q for q in _BUILT_IN}
 
@@ -76,11 +78,11 @@ def bytes_per_point(name: str, dim: int) -> int:
 HISTORY = {
     "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
     "strain_energy": "J", "plastic_work": "J", "damage_work": "J", "viscous_work": "J", "hourglass_energy": "J",
-    "external_work": "J", "total_energy": "J",
+    "external_work": "J", "total_energy": "J", "contact_energy": "J", "contact_closest": "1",
     "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
 HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),
-                    (r"(wall|tool)[0-9]+_force_[xyz]", "N"))
+                    (r"(wall|tool)[0-9]+_force_[xyz]", "N"), (r"contact_force_[xyz]\..*", "N"))
 
 
 def is_history_series(name: str) -> bool:

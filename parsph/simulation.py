@@ -34,7 +34,8 @@ from mpi4py import MPI
 from parsph import config, fields, materials
 from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
 from parsph.collocation import BoundaryCollocation, collocated
-from parsph.diagnostics import RowReduction, global_parts, probe_parts
+from parsph.contact import Contact
+from parsph.diagnostics import RowReduction, contact_parts, global_parts, probe_parts
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import galerkin, reference, tlsph
@@ -247,6 +248,9 @@ class Simulation:
         efg = any(collocated(b.formulation) for b in self.bodies)
         self.collocation = BoundaryCollocation(self) if efg and self.scene["bc"] else None
         self.walls.select(self.groups)
+        self.contact = Contact(self.scene["contact"], self.bodies, self.body, self.measure, self.mass, self.gid, n, dim,
+                               config.thickness(self.scene), self.comm) if self.scene.get("contact") else None
+        self.omega_c2 = self.contact.omega2 if self.contact else np.zeros(0)
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 
@@ -388,7 +392,7 @@ class Simulation:
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
                 b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
-                b.formulation.hourglass_form, self.scratch33)
+                b.formulation.hourglass_form, self.omega_c2, self.scratch33)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -461,6 +465,15 @@ class Simulation:
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.viscous:
             force += self.f_visc
+        if self.contact:
+            t0 = clock()
+            try:
+                self.contact.evaluate(self.X[:n] + self.u[:n])
+            except ArithmeticError:
+                raise ParsphError(f"contact failed at step {self.step_count + 1}, t = {self.t:.6g}: particles of "
+                                  f"two bodies coincide; the run is unstable: {self._advice()}") from None
+            force += self.contact.force
+            seconds["contact"] += clock() - t0
         if self.body_acc is not None:
             force += self.mass[:n, None] * self.body_acc
         if self.tractions:
@@ -751,6 +764,10 @@ class Simulation:
                     rows = np.flatnonzero(self.body[sel] == b.index)
                     out[rows] = self.damage_state(b)[0][sel[rows], damage.DAMAGE]
             return out
+        if name == "contact_force":
+            return self.contact.force[sel] if self.contact else np.zeros((len(sel), self.dim))
+        if name == "body":
+            return self.body[sel].astype(float)
         if name == "disorder":
             return self.disorder()[sel]
         if name == "spacing_ratio":
@@ -829,8 +846,10 @@ class Simulation:
         (V^0 w_p), damage work (the work the particles have taken beyond their strain energy,
         V^0 (W - psi): materials.damage), viscous work (absorbed by the artificial viscosity),
         hourglass (the particles' penalty, the work absorbed on this rank by the paper form,
-        the penalty released at reference updates) and external work."""
-        out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "external": []}
+        the penalty released at reference updates), contact (each particle's half of its
+        pairs' potential: parsph.contact) and external work."""
+        out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "contact": [],
+               "external": []}
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
@@ -841,6 +860,7 @@ class Simulation:
                                  [self.volume[lo:hi] * (self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi])])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([self.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
+            out["contact"].append([self.contact.energy[lo:hi]] if self.contact else [])
             out["external"].append([acc["external_work"]])
         return out
 
@@ -873,6 +893,7 @@ class Simulation:
         reduction = reduction or RowReduction(self.comm)
         energies = global_parts(self, reduction)
         walls = reduction.add_sums(self.walls.contacts)  # obstacle-major, then component
+        contact = contact_parts(self, reduction)
         probes = probe_parts(self.scene["probes"], self, reduction)
         reduction.reduce()
         out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
@@ -881,5 +902,6 @@ class Simulation:
         for k, label in enumerate(self.walls.names):
             for a, name in enumerate("xyz"[: self.dim]):
                 out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * self.dim + a])
+        out.update(contact())
         out.update(probes())
         return out

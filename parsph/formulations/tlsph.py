@@ -418,10 +418,11 @@ def spring_tensor(out, k, x, dim):
 
 
 @njit(cache=True, _nrt=False)
-def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass, C):
+def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass,
+                     omega_c2, C):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
-        dt_i = 2 / sqrt(omega_el^2 + omega_hg^2),  omega_el = 2 c_i / (l_i s_min),
+        dt_i = 2 / sqrt(omega_el^2 + omega_hg^2 + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
     the motion from the reference fs (the current spacing shrinks with it), and c_i the
     reference P-wave speed times the square root of the law's stiffening under the total F
@@ -437,7 +438,8 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i, about 1/dim of the scalar sum
     2 sum_j k_ij / m_i on a disordered lattice (the same in 1D). The strain max |ln s| over
     the principal stretches of fs is the distortion measure of the adaptive reference
-    update. In the total-Lagrangian formulation fs and F are the same array. Also returns
+    update. omega_c^2 (omega_c2, empty without contact) bounds the contact springs the same
+    way (parsph.contact). In the total-Lagrangian formulation fs and F are the same array. Also returns
     the first particle with the smallest step (-1 if there is none); the first flattened or
     inverted particle i gives (0, inf, i). Failed particles (broken) are left out: they
     carry no stress. C: 3x3 scratch."""
@@ -455,7 +457,10 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
             return 0.0, np.inf, i  # no stable step
         worst = max(worst, math.log(f_max), -math.log(f_min))
         w_el = 2.0 * wave_speed * math.sqrt(stiffening) * stab[i] ** 0.75 / length
-        dt_i = 2.0 / math.sqrt(w_el * w_el + (omega_hg2[i] if hourglass != HOURGLASS_OFF else 0.0))
+        w2 = w_el * w_el + (omega_hg2[i] if hourglass != HOURGLASS_OFF else 0.0)
+        if len(omega_c2):
+            w2 += omega_c2[i]
+        dt_i = 2.0 / math.sqrt(w2)
         if dt_i < dt:
             dt, smallest = dt_i, i
     return dt, worst, smallest

@@ -1,0 +1,217 @@
+"""Contact between bodies: particles of two bodies that come closer than the sum of their
+contact radii repel each other through a force derived from a potential, so that momentum
+is conserved exactly and energy to the time integration's error ([G §4.3]: tools and body
+pressed together through a repulsive Hertzian potential with the bodies' moduli).
+
+A particle's contact radius is `radius` times half its spacing (the d-th root of its
+measure); a pair overlaps by delta = r_i + r_j - |x_j - x_i| > 0 in the current
+configuration, and pushes apart along x_j - x_i with
+    3D: F = 4/3 E* sqrt(R*) delta^(3/2)       (Hertz, two spheres: R* = r_i r_j / (r_i + r_j))
+    2D: F = pi/4 E* t delta                    (Hertz, two parallel cylinders of length t,
+                                                the thickness: plane strain)
+    1D: F = A delta / (r_i / M_i + r_j / M_j)  (the two half-slabs of the contact radii in
+                                                series: the bar's own stiffness, cross-section A)
+with 1/E* = (1 - nu_i^2) / E_i + (1 - nu_j^2) / E_j and M the P-wave modulus of uniaxial
+strain. Its potential, F delta / (k + 1) for F proportional to delta^k, is the contact
+energy (half of it for each particle), part of the total energy. The stiffness
+dF/ddelta of each pair enters the stable time step as a spring
+(formulations.tlsph.stable_time_step): of each overlapping pair in 3D (where it grows
+from zero with the overlap), of each pair closer than its contact distance plus the skin
+in 1D and 2D (a linear spring: the step that brings a pair into contact must be stable
+for it too).
+
+The pairs are found in the current configuration with a skin s of half the largest contact
+distance: candidate lists (the pairs within their contact distance plus 2 s; rows: owned
+particles, columns in global-id order, so that every sum runs in the same order on any
+number of ranks) and contact ghosts (the particles of other ranks within that reach of this
+rank's contact particles, their positions refreshed at every step) are kept until a
+particle has moved s/2 since they were made: until then they hold every pair within its
+contact distance plus s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from mpi4py import MPI
+from numba import njit
+
+from parsph.neighbors import close_pairs
+
+SKIN = 0.5  # of the largest contact distance
+
+
+def contact_modulus(c, dim: int) -> float:
+    """A body's modulus in the contact stiffness, from its law's small-strain constants c:
+    M = lam + 2 mu in 1D; E / (1 - nu^2) = 4 mu (lam + mu) / (lam + 2 mu) in 2D and 3D, the
+    bulk modulus for a fluid (mu = 0)."""
+    if dim == 1:
+        return c.lam + 2.0 * c.mu
+    return 4.0 * c.mu * (c.lam + c.mu) / (c.lam + 2.0 * c.mu) if c.mu > 0 else c.bulk
+
+
+class Contact:
+    """The scene's contact pairs of bodies, on this rank's particles."""
+
+    def __init__(self, specs: list, bodies: list, body: np.ndarray, measure: np.ndarray, mass: np.ndarray,
+                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm):
+        """specs: the scene's [[contact]] tables; bodies: the simulation's bodies (names,
+        constants); body, measure, mass, gid: of the local particles (the owned first)."""
+        n = n_owned
+        index = {b.name: b.index for b in bodies}
+        self.entries = [(index[s["bodies"][0]], index[s["bodies"][1]]) for s in specs]
+        self.labels = [f"{s['bodies'][0]}.{s['bodies'][1]}" for s in specs]
+        count = len(bodies)
+        self.entry_of = np.full((count, count), -1, np.int64)  # body pair -> entry
+        for k, (a, b) in enumerate(self.entries):
+            self.entry_of[a, b] = self.entry_of[b, a] = k
+        touching = np.zeros(count, bool)
+        touching[[b for pair in self.entries for b in pair]] = True
+        factor = np.zeros(count)
+        for s in specs:  # each body's contact radius factor: its entries agree (config)
+            factor[[index[name] for name in s["bodies"]]] = s["radius"]
+        modulus = np.array([contact_modulus(b.constants, dim) for b in bodies])
+        self.dim, self.comm, self.n = dim, comm, n
+        self.scale = thickness if dim < 3 else 1.0  # the thickness (2D) or the cross-section (1D)
+        self.body = body[:n]
+        self.gid = gid[:n]
+        self.mass = mass[:n]
+        self.radius = 0.5 * factor[body[:n]] * measure[:n] ** (1.0 / dim)
+        self.modulus = modulus[body[:n]]
+        self.mine = np.flatnonzero(touching[body[:n]])  # owned particles of bodies in contact
+        largest = float(self.radius.max()) if n else 0.0
+        self.distance = 2.0 * comm.allreduce(largest, op=MPI.MAX)  # the largest contact distance
+        self.skin = SKIN * self.distance
+        self.force = np.zeros((n, dim))
+        self.energy = np.zeros(n)
+        self.omega2 = np.zeros(n)  # the springs' bound on the squared frequency
+        self.entry_force = np.zeros((len(self.entries), n, dim))  # each entry's force from the other body
+        self.closest = np.ones(n)  # |x_ij| / (r_i + r_j) of the closest candidate
+        self.searches = 0
+        self._built_at = None  # owned contact particles' positions when the lists were made
+
+    def evaluate(self, x: np.ndarray) -> None:
+        """The contact forces, energies and spring bounds at the owned particles' current
+        positions x (n, dim) (collective: ghost positions, and the lists when due)."""
+        if self._built_at is None or self._moved(x) > 0.5 * self.skin:
+            self._search(x)
+        else:
+            self._refresh(x)
+        self.x[: self.n] = x
+        _repulsion(self.n, self.ptr, self.idx, self.x, self.radius_all, self.modulus_all, self.body_all,
+                   self.entry_of, self.mass, self.dim, self.scale, self.skin, self.force, self.energy, self.omega2,
+                   self.entry_force, self.closest)
+
+    def _moved(self, x: np.ndarray) -> float:
+        """The largest displacement of a contact particle of any rank since the lists were made."""
+        d = x[self.mine] - self._built_at
+        largest = float(np.sqrt(np.einsum("na,na->n", d, d).max())) if len(d) else 0.0
+        return self.comm.allreduce(largest, op=MPI.MAX)
+
+    def _search(self, x: np.ndarray) -> None:
+        """Contact ghosts (the other ranks' contact particles within the largest contact
+        distance plus the skin of this rank's) and candidate lists."""
+        n, comm, reach = self.n, self.comm, self.distance + 2.0 * self.skin
+        self._built_at = x[self.mine].copy()
+        mine = self.mine
+        own = x[mine]
+        boxes = comm.allgather((own.min(axis=0), own.max(axis=0)) if len(own) else None)
+        self.send, chunks = {}, []
+        for r, box in enumerate(boxes):
+            if r == comm.rank or box is None or not len(own):
+                chunks.append(None)
+                continue
+            gap = np.maximum(0.0, np.maximum(box[0] - own, own - box[1]))
+            sel = mine[np.einsum("na,na->n", gap, gap) <= reach * reach]
+            if len(sel):
+                self.send[r] = sel
+            chunks.append((self.gid[sel], self.body[sel], self.radius[sel], self.modulus[sel]) if len(sel) else None)
+        received = comm.alltoall(chunks) if comm.size > 1 else [None]
+        self.recv = {}
+        start = n
+        for r, chunk in enumerate(received):
+            if chunk is not None:
+                self.recv[r] = slice(start, start + len(chunk[0]))
+                start += len(chunk[0])
+        parts = [c for c in received if c is not None]
+        own = (self.gid, self.body, self.radius, self.modulus)
+        self.gid_all, self.body_all, self.radius_all, self.modulus_all = (
+            np.concatenate([mine_k] + [c[k] for c in parts]) for k, mine_k in enumerate(own))
+        self.x = np.zeros((start, self.dim))
+        self.x[:n] = x
+        self._refresh(x)
+        points = np.concatenate([mine, np.arange(n, start)])
+        i, j = close_pairs(self.x[points], reach)
+        i, j = points[i], points[j]
+        sep = self.x[j] - self.x[i]
+        dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
+        keep = (dist < self.radius_all[i] + self.radius_all[j] + 2.0 * self.skin) & \
+            (self.entry_of[self.body_all[i], self.body_all[j]] >= 0)
+        i, j = i[keep], j[keep]
+        i, j = np.concatenate([i, j]), np.concatenate([j, i])
+        rows = i < n
+        i, j = i[rows], j[rows]
+        order = np.lexsort((self.gid_all[j], i))
+        self.idx = j[order]
+        self.ptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(i, minlength=n), out=self.ptr[1:])
+        self.searches += 1
+
+    def _refresh(self, x: np.ndarray) -> None:
+        """The contact ghosts' current positions from their owners."""
+        if not self.recv and not self.send:
+            return
+        requests = [self.comm.Irecv(self.x[rows], source=r, tag=11) for r, rows in self.recv.items()]
+        data = [np.ascontiguousarray(x[sel]) for sel in self.send.values()]
+        requests += [self.comm.Isend(d, dest=r, tag=11) for r, d in zip(self.send, data)]
+        MPI.Request.Waitall(requests)
+
+
+@njit(cache=True, _nrt=False)
+def _repulsion(n, ptr, idx, x, radius, modulus, body, entry_of, mass, dim, scale, skin, force, energy, omega2,
+               entry_force, closest):
+    """The contact force, energy (half of each pair's potential), spring bound
+    2 sum_j dF/ddelta / m_i (of the pairs closer than the contact distance plus the skin in
+    1D and 2D) and closest approach of the owned particles 0..n-1, and the
+    force on each of them from the other body of each contact entry; the pairs' forces
+    summed in the rows' order (global ids)."""
+    for i in range(n):
+        for a in range(dim):
+            force[i, a] = 0.0
+            for k in range(entry_force.shape[0]):
+                entry_force[k, i, a] = 0.0
+        energy[i] = 0.0
+        omega2[i] = 0.0
+        closest[i] = 1.0
+        for p in range(ptr[i], ptr[i + 1]):
+            j = idx[p]
+            r2 = 0.0
+            for a in range(dim):
+                e = x[j, a] - x[i, a]
+                r2 += e * e
+            r = math.sqrt(r2)
+            reach = radius[i] + radius[j]
+            closest[i] = min(closest[i], r / reach)
+            delta = reach - r
+            if dim < 3 and delta > -skin:
+                if dim == 2:
+                    k = 0.25 * math.pi * scale / (1.0 / modulus[i] + 1.0 / modulus[j])
+                else:
+                    k = scale / (radius[i] / modulus[i] + radius[j] / modulus[j])
+                omega2[i] += 2.0 * k / mass[i]
+            if not delta > 0.0:
+                continue
+            if dim == 3:
+                k = 4.0 / 3.0 * math.sqrt(radius[i] * radius[j] / reach) / (1.0 / modulus[i] + 1.0 / modulus[j])
+                f = k * delta * math.sqrt(delta)
+                omega2[i] += 2.0 * 1.5 * k * math.sqrt(delta) / mass[i]
+                energy[i] += 0.5 * 0.4 * f * delta
+            else:
+                f = k * delta
+                energy[i] += 0.5 * 0.5 * f * delta
+            entry = entry_of[body[i], body[j]]
+            for a in range(dim):
+                push = -f * (x[j, a] - x[i, a]) / r  # away from j
+                force[i, a] += push
+                entry_force[entry, i, a] += push
