@@ -1,6 +1,7 @@
 """Contact between bodies (parsph.contact): the pair force is the gradient of its potential
 and obeys Newton's third law; two bars meeting head-on separate after 2L/c with their
-velocities exchanged; the same bits on any rank count and across a restart; bad input."""
+velocities exchanged; two rings collide as one ring against its plane of symmetry; the
+same bits on any rank count and across a restart; bad input."""
 
 from __future__ import annotations
 
@@ -96,6 +97,30 @@ def test_contact_springs_shorten_the_stable_step():
     assert touching.dt == pytest.approx(apart.dt / math.sqrt(1.5), rel=1e-6)
 
 
+def test_two_rings_colliding_rise_as_one_ring_against_the_symmetry_plane():
+    """runs/rings_contact.toml (two bodies) against runs/rings.toml (one ring, a rigid
+    frictionless wall in the plane of symmetry), both total-Lagrangian without
+    stabilisation: each ring's top rises as the single ring's to 6 % (L2 over the run; the
+    particles of the two rings meet on a surface rough at the scale of the spacing where the
+    wall is flat, and the wall's contact is perfectly plastic where the rings' is elastic),
+    the rings mirror each other, separate, and keep zero momentum and their energy."""
+    pair = run_until(simulation("rings_contact"), 0.05, every=8)
+    single = run_until(simulation("rings", ['formulation.type="tlsph"', "formulation.update_every=0",
+                                            "formulation.hessian=0"]), 0.05, every=8)
+    rise = single["top_y"] - single["top_y"][0]
+    for side in ("left", "right"):
+        other = np.interp(single["time"], pair["time"], pair[f"top_y_{side}"] - pair[f"top_y_{side}"][0])
+        assert np.linalg.norm(other - rise) < 0.06 * np.linalg.norm(rise)
+    assert np.abs(pair["top_y_left"] - pair["top_y_right"]).max() < 0.01 * rise.max()
+    touching = np.flatnonzero(pair["contact_force_x.left.right"] != 0.0)
+    assert 0.002 <= pair["time"][touching[0]] < 0.003 and pair["time"][touching[-1]] < 0.04
+    assert pair["gap"][-1] < -0.005  # the left ring's face has left the plane between them
+    impact = pair["kinetic_energy"][0]
+    for a in "xy":
+        assert np.abs(pair[f"momentum_{a}"]).max() < 1e-14 * impact
+    assert np.abs(pair["total_energy"] - pair["total_energy"][0]).max() < 1e-3 * impact
+
+
 @pytest.mark.mpi
 def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     """bars_impact (each bar's particles split between ranks; the contact face on a rank
@@ -117,6 +142,14 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert_identical_outputs(*outs)
     assert_identical_outputs(outs[0], split)
+    rings = ["--set", "parameters.spacing=5e-3", "--set", "time.max_steps=120"]  # touching from step ~45
+    outs = []
+    for ranks in (1, 3):
+        out = tmp_path / f"rings_{ranks}"
+        proc = parsph(["run", RUNS / "rings_contact.toml", "--out", out, "--quiet", *rings], ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+        outs.append(out)
+    assert_identical_outputs(*outs)
 
 
 @pytest.mark.parametrize("contact, message", [
