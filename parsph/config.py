@@ -714,6 +714,8 @@ BODY_KEYS = {
     "parts": Key("table", REQUIRED, doc="array of shapes, united, as geometry.parts"),
     "material": Key("table", REQUIRED, doc="the body's material, as [material]"),
     "formulation": Key("table", {}, doc="keys of [formulation] that differ for this body"),
+    "rigid": Key("bool", False, None, "the body moves as one rigid body and carries no stress (parsph.rigid): "
+                                      "as [[bc]] holding all of it prescribe, else freely"),
 }
 
 

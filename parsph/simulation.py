@@ -45,6 +45,7 @@ from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, 
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.points import PointSet
+from parsph.rigid import RigidBody
 from parsph.walls import Walls
 
 BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
@@ -74,6 +75,7 @@ class Body:
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
         self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
+        self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
         self.density = spec["material"]["density"]
         kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
         self.formulation = kind(spec["formulation"], dim, self.law.law_id, damaged=self.failure_strain is not None)
@@ -129,6 +131,7 @@ class Simulation:
         # running totals of the work done on this rank's particles of each body, exact (exact_sum)
         self.totals = {name: [Accumulator() for _ in self.bodies] for name in TOTALS}
         self.walls = Walls(scene["walls"], scene["tools"], dim)
+        self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
         self._adopt(local)
         self._check_hourglass_stiffness()
         n = self.n_owned
@@ -138,7 +141,8 @@ class Simulation:
                                          self.v[:n], scene["parameters"])
             self._prescribe_displacement(0.0)
             self._prescribe_velocity(0.0)
-        else:
+        self.rigid_bodies = self._rigid_bodies(restart)
+        if restart is not None:
             clock, carried = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
@@ -161,6 +165,33 @@ class Simulation:
         self._floor = scene["time"]["step_floor"] * self._first_stable
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
         self.bound_hourglass = scene["time"]["dt"] == 0 or (self.updated and self.update_strain > 0)
+
+    def _rigid_bodies(self, restart: dict | None) -> list:
+        """The freely moving rigid bodies (parsph.rigid), from the particles' initial
+        velocities or the checkpoint; a rigid body that a [[bc]] holds is moved by it, and
+        must be held whole (collective)."""
+        out = []
+        for b in self.bodies:
+            if not b.rigid:
+                continue
+            with collective(self.comm):
+                held = [(i, self.comm.allreduce(int(np.count_nonzero((c.index >= b.lo) & (c.index < b.hi)))), c)
+                        for i, c in enumerate(self.bcs.items)]
+                count = b.last - b.first
+                for i, total, c in held:
+                    if total and (total != count or len(c.components) != self.dim or c.duration < math.inf):
+                        raise InputError(f"bc[{i}] holds part of rigid body '{b.name}' ({total} of its {count} "
+                                         "particles, or some components, or for a duration): a rigid body is held "
+                                         "whole, every particle in every component for the whole run, or not at all")
+            if any(total for _, total, _ in held):
+                continue
+            body = RigidBody(b, self.mass, self.X, self.v, self.comm)
+            if restart is None:
+                body.project(self.mass, self.X + self.u, self.v)
+            else:
+                body.restore(restart["totals"]["rigid"][len(out)])
+            out.append(body)
+        return out
 
     # ----------------------------------------------------------------- set-up helpers
     def _adopt(self, local: LocalBody) -> None:
@@ -252,7 +283,9 @@ class Simulation:
                                config.thickness(self.scene), self.comm) if self.scene.get("contact") else None
         self.omega_c2 = self.contact.omega2 if self.contact else np.zeros(0)
         for b in self.bodies:
-            b.stages = b.formulation.stages(self, b)
+            b.stages = [] if b.rigid else b.formulation.stages(self, b)
+            if b.rigid:
+                self.F[b.lo:b.hi] = np.eye(dim)
 
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned
@@ -389,6 +422,8 @@ class Simulation:
         dt, strain, smallest = np.inf, 0.0, -1
         ref = self.ref
         for b in self.bodies:  # in row order: the first particle with the smallest step
+            if b.rigid:  # no strain: its contact springs count at the particles they push
+                continue
             step, worst, first = tlsph.stable_time_step(
                 b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
                 b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
@@ -513,10 +548,14 @@ class Simulation:
         v += dt * self.acc
 
     def _prescribe_velocity(self, t: float) -> None:
-        """The constrained velocities at t (collocated on EFG bodies: parsph.collocation)."""
+        """The constrained velocities at t (collocated on EFG bodies: parsph.collocation),
+        and the rigid velocities of the free rigid bodies' particles."""
         self.bcs.set_velocity(self.v[: self.n_owned], t)
         if self.collocation:
             self.collocation.velocity(t)
+        n = self.n_owned
+        for body in self.rigid_bodies:
+            body.project(self.mass, self.X[:n] + self.u[:n], self.v)
 
     def _prescribe_displacement(self, t: float) -> None:
         self.bcs.set_displacement(self.u[: self.n_owned], t)
@@ -543,6 +582,8 @@ class Simulation:
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t + 0.5 * dt)
         self.u[:n] += dt * self.v[:n]
+        for body in self.rigid_bodies:
+            body.drift(dt, self.X, self.u, self.v, self.F)
         self.t = t_new
         self._prescribe_displacement(self.t)
         force_old = self.force
@@ -726,7 +767,8 @@ class Simulation:
         return {
             "fields": self.particles.checkpointed(), "group_names": self.group_names,
             "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in self.point_sets()[1:]},
-            "totals": {**totals, "wall_force": self.wall_forces().tolist()},
+            "totals": {**totals, "wall_force": self.wall_forces().tolist(),
+                       "rigid": [body.state() for body in self.rigid_bodies]},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
                       "since_update": self.since_update, "first_stable": self._first_stable},
         }

@@ -1,0 +1,122 @@
+"""Rigid bodies made of particles: a body with `rigid = true` carries no stress; its
+particles move as one rigid body, either as [[bc]] prescribe (a tool or a plate with a
+velocity history: the conditions hold every particle of the body) or freely under the
+forces on its particles (contact, body force): Newton-Euler.
+
+Free motion, in the kick-drift-kick step: after each half kick of the particles (each by
+its own force) the body takes the linear and angular momentum of its particles,
+    V = P / M,   omega = I^-1 L,   P = sum m v,   L = sum m r x v,   r = x - c,
+I = R I0 R^T (3D; I0 in 2D) the inertia about the centre of mass c in the current orientation R, and its
+particles the rigid velocities v = V + omega x r (impulse and angular impulse as Newton's
+and Euler's equations give them; the sums exact, so the same on any number of ranks); the
+drift moves the centre by dt V and turns R by omega dt (Rodrigues' formula in 3D), and
+puts the particles at x = c + R (X - c0) with the body's velocities there. The particles' F is R: no strain, no stress.
+The state (c, R, V, omega) is checkpointed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsph.exact_sum import allsum, totals
+
+
+def cross(omega: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """omega x r for rows r (n, dim): omega a scalar (1,) in 2D, a vector in 3D, empty in 1D."""
+    if r.shape[1] == 2:
+        return omega[0] * np.stack([-r[:, 1], r[:, 0]], axis=1)
+    if r.shape[1] == 3:
+        return np.cross(omega, r)
+    return np.zeros_like(r)
+
+
+def moments(r: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """r x p per row: (n, 1) in 2D, (n, 3) in 3D, (n, 0) in 1D."""
+    if r.shape[1] == 2:
+        return (r[:, 0] * p[:, 1] - r[:, 1] * p[:, 0])[:, None]
+    if r.shape[1] == 3:
+        return np.cross(r, p)
+    return np.zeros((len(r), 0))
+
+
+def rotation(angle: np.ndarray, dim: int) -> np.ndarray:
+    """The rotation by the angle (2D, (1,)) or the rotation vector (3D)."""
+    if dim == 2:
+        c, s = np.cos(angle[0]), np.sin(angle[0])
+        return np.array([[c, -s], [s, c]])
+    if dim == 3:
+        theta = float(np.sqrt(angle @ angle))
+        if theta == 0.0:
+            return np.eye(3)
+        k = angle / theta
+        K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+        return np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * (K @ K)
+    return np.eye(dim)
+
+
+class RigidBody:
+    """A freely moving rigid body: its mass, reference centre and inertia, and its state."""
+
+    def __init__(self, body, mass: np.ndarray, X: np.ndarray, v: np.ndarray, comm):
+        """body: the simulation's Body (its owned rows lo..hi); mass, X, v: of the local
+        particles; the initial V and omega from the particles' momenta (collective)."""
+        self.body, self.comm = body, comm
+        lo, hi = body.lo, body.hi
+        dim = X.shape[1]
+        m = mass[lo:hi]
+        first = allsum(comm, totals([m, m[:, None] * X[lo:hi]]))
+        self.mass = float(first[0])
+        self.centre0 = np.array([float(s) for s in first[1:]]) / self.mass
+        r = X[lo:hi] - self.centre0
+        self.inertia0 = self._inertia(m, r, dim)
+        self.centre = self.centre0.copy()
+        self.R = np.eye(dim)
+        self.V = np.zeros(dim)
+        self.omega = np.zeros({1: 0, 2: 1, 3: 3}[dim])
+
+    def _inertia(self, m: np.ndarray, r: np.ndarray, dim: int) -> np.ndarray:
+        """The inertia tensor about the centre (collective): (1, 1) in 2D, (3, 3) in 3D."""
+        if dim == 1:
+            return np.zeros((0, 0))
+        if dim == 2:
+            return np.array([[float(allsum(self.comm, totals([m * np.einsum("na,na->n", r, r)]))[0])]])
+        parts = [m * (np.einsum("na,na->n", r, r) * (a == b) - r[:, a] * r[:, b]) for a in range(3) for b in range(3)]
+        return np.array([float(s) for s in allsum(self.comm, totals(parts))]).reshape(3, 3)
+
+    def project(self, mass: np.ndarray, x: np.ndarray, v: np.ndarray) -> None:
+        """Take the momenta of the body's particles (rows lo..hi of the masses, current
+        positions x and velocities v) as the body's, and give its particles the rigid
+        velocities (collective)."""
+        lo, hi = self.body.lo, self.body.hi
+        r = x[lo:hi] - self.centre
+        p = mass[lo:hi, None] * v[lo:hi]
+        sums = allsum(self.comm, totals([p, moments(r, p)]))
+        dim = x.shape[1]
+        self.V = np.array([float(s) for s in sums[:dim]]) / self.mass
+        if len(self.omega):
+            L = np.array([float(s) for s in sums[dim:]])
+            inertia = self.inertia0 if dim == 2 else self.R @ self.inertia0 @ self.R.T
+            self.omega = np.linalg.solve(inertia, L)
+        v[lo:hi] = self.V + cross(self.omega, r)
+
+    def drift(self, dt: float, X: np.ndarray, u: np.ndarray, v: np.ndarray, F: np.ndarray) -> None:
+        """Move the body by dt: the centre, the orientation, its particles' displacements u,
+        velocities v (the body's, at their new places) and deformation gradients F (rows lo..hi)."""
+        lo, hi = self.body.lo, self.body.hi
+        dim = X.shape[1]
+        self.centre = self.centre + dt * self.V
+        self.R = rotation(dt * self.omega, dim) @ self.R
+        r = (X[lo:hi] - self.centre0) @ self.R.T
+        u[lo:hi] = self.centre + r - X[lo:hi]
+        v[lo:hi] = self.V + cross(self.omega, r)
+        F[lo:hi] = self.R
+
+    def state(self) -> dict:
+        return {"centre": self.centre.tolist(), "R": self.R.tolist(), "V": self.V.tolist(),
+                "omega": self.omega.tolist()}
+
+    def restore(self, state: dict) -> None:
+        self.centre = np.array(state["centre"])
+        self.R = np.array(state["R"])
+        self.V = np.array(state["V"])
+        self.omega = np.array(state["omega"])

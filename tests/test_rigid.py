@@ -1,0 +1,155 @@
+"""Rigid bodies made of particles (parsph.rigid): free flight and spin as Newton and Euler
+say, a spinning rigid disk striking an elastic block (rigidity, momenta, energy), a rigid
+body held by [[bc]], and bodies held in part refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from parsph.errors import InputError
+from physics import run_until, simulation
+
+from conftest import assert_identical_outputs, parsph
+
+DISK = """
+[scene]
+name = "rigid_disk"
+dimension = 2
+[kernel]
+type = "wendland_c2"
+support = 2.2
+[formulation]
+type = "tlsph"
+[[bodies]]
+name = "block"
+[[bodies.parts]]
+shape = "box"
+lower = [0.0, 0.0]
+upper = [0.02, 0.01]
+spacing = 1.0e-3
+[bodies.material]
+model = "neo_hookean"
+density = 1100.0
+youngs_modulus = 1.0e7
+poisson_ratio = 0.3
+[[bodies]]
+name = "disk"
+rigid = true
+[[bodies.parts]]
+shape = "disk"
+center = [0.01, 0.0161]
+radius = 0.005
+spacing = 1.0e-3
+[bodies.material]
+model = "neo_hookean"
+density = 7800.0
+youngs_modulus = 2.0e11
+poisson_ratio = 0.3
+[[contact]]
+bodies = ["block", "disk"]
+[groups.disk]
+sphere = { center = [0.01, 0.0161], radius = 0.0055 }
+[[initial]]
+type = "velocity"
+group = "disk"
+value = [1.0, -5.0]
+[[initial]]
+type = "angular_velocity"
+group = "disk"
+omega = [300.0]
+center = [0.01, 0.0161]
+[time]
+end = 4.0e-3
+"""
+
+
+def disk_particles(sim) -> slice:
+    body = sim.bodies[1]
+    return slice(body.lo, body.hi)
+
+
+def test_a_free_rigid_body_falls_and_spins_as_newton_and_euler_say():
+    """The disk alone under gravity (the block far away): its particles stay a rigid copy of
+    the disk turned by omega t about a centre that falls as c0 + v0 t + g t^2 / 2 (the
+    step is exact for a constant force and a constant spin), to round-off."""
+    gravity = np.array([0.0, -9.81])
+    text = DISK.replace("0.0161", "0.1161").replace("[time]", "[loads]\nbody_acceleration = [0.0, -9.81]\n[time]")
+    sim = simulation(text)
+    rows = disk_particles(sim)
+    X = sim.X[rows].copy()
+    centre0 = sim.rigid_bodies[0].centre0
+    while sim.t < 2e-3:
+        sim.step()
+    t = sim.t
+    c, s = np.cos(300.0 * t), np.sin(300.0 * t)
+    turned = (X - centre0) @ np.array([[c, -s], [s, c]]).T
+    expected = centre0 + np.array([1.0, -5.0]) * t + 0.5 * gravity * t * t + turned
+    assert np.allclose(sim.X[rows] + sim.u[rows], expected, rtol=0, atol=1e-12)
+    assert np.allclose(sim.v[rows], np.array([1.0, -5.0]) + gravity * t
+                       + 300.0 * np.stack([-turned[:, 1], turned[:, 0]], axis=1), rtol=0, atol=1e-9)
+    assert np.allclose(sim.J[rows], 1.0)  # F is the rotation: no strain, no stress but round-off
+    assert sim.von_mises(np.arange(rows.start, rows.stop)).max() < 1e-13 * 2.0e11
+
+
+def test_a_spinning_rigid_disk_strikes_an_elastic_block_and_stays_rigid():
+    """The disk (spinning at 300 rad/s) hits the block and bounces: every distance between
+    its particles unchanged to round-off, linear momentum to round-off, angular momentum
+    to 1e-4 and the total energy to 1e-3 of the kinetic energy at impact."""
+    sim = simulation(DISK)
+    rows = disk_particles(sim)
+    x0 = sim.X[rows] + sim.u[rows]
+    h = run_until(sim, 4e-3, every=10)
+    x = sim.X[rows] + sim.u[rows]
+    distances = [np.linalg.norm(p[:, None] - p[None], axis=2) for p in (x0, x)]
+    assert np.abs(distances[1] - distances[0]).max() < 1e-15
+    assert np.abs(h["contact_force_y.block.disk"]).max() > 0  # they touched
+    assert h["kinetic_energy.disk"][-1] < 0.9 * h["kinetic_energy.disk"][0]  # the block took some
+    impact = h["kinetic_energy"][0]
+    for a in "xy":
+        assert np.abs(h[f"momentum_{a}"] - h[f"momentum_{a}"][0]).max() < 1e-13 * abs(h["momentum_y"][0])
+    assert np.abs(h["angular_momentum"] - h["angular_momentum"][0]).max() < 1e-4 * abs(h["angular_momentum"][0])
+    assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-3 * impact
+
+
+def test_a_rigid_body_held_by_a_condition_moves_as_it_says_and_a_part_cannot_be_held():
+    """A [[bc]] holding the whole disk moves it with the prescribed velocity and no spin;
+    one holding part of it, or some components, is refused naming the condition."""
+    held = DISK + '[[bc]]\ntype = "velocity"\ngroup = "disk"\nvalue = [0.0, -2.0]\n'
+    sim = simulation(held)
+    rows = disk_particles(sim)
+    assert not sim.rigid_bodies
+    while sim.t < 1e-3:
+        sim.step()
+    assert np.allclose(sim.u[rows], [0.0, -2.0 * sim.t], rtol=1e-12, atol=0)
+    part = DISK + ('[groups.half]\nbox = { lower = [0.0, 0.0161], upper = [0.02, 0.03] }\n'
+                   '[[bc]]\ntype = "fixed"\ngroup = "half"\n')
+    with pytest.raises(InputError, match=r"bc\[0\] holds part of rigid body 'disk'"):
+        simulation(part)
+    some = DISK + '[[bc]]\ntype = "fixed"\ngroup = "disk"\ncomponents = [1]\n'
+    with pytest.raises(InputError, match=r"bc\[0\] holds part of rigid body 'disk'"):
+        simulation(some)
+
+
+@pytest.mark.mpi
+def test_rigid_body_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
+    """The spinning disk striking the block (touching from step ~60): the same history and
+    final state on 1 and 3 ranks, and checkpointed at step 150 on 2 ranks, restarted on 3,
+    the same again (the rigid body's centre, orientation and velocities carried)."""
+    scene = tmp_path / "rigid_disk.toml"
+    scene.write_text(DISK + "[output]\nhistory_every = 5\n")
+    steps = ["--set", "time.max_steps=300"]
+    outs = []
+    for ranks in (1, 3):
+        out = tmp_path / f"ranks_{ranks}"
+        proc = parsph(["run", scene, "--out", out, "--quiet", *steps], ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+        outs.append(out)
+    split = tmp_path / "split"
+    proc = parsph(["run", scene, "--out", split, "--quiet", "--set", "time.max_steps=150", "--set",
+                   "output.checkpoint_every=150"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    proc = parsph(["run", scene, "--out", split, "--quiet", *steps, "--restart", "latest"], ranks=3)
+    assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(*outs)
+    assert_identical_outputs(outs[0], split)
