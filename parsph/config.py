@@ -299,6 +299,9 @@ CONTACT_KEYS = {
                   "contact radius of a particle over half its spacing: two particles touch when their "
                   "centres are closer than the mean of their spacings times this (at most the kernel "
                   "support)"),
+    "stiffness": Key("float", 1.0, positive, "factor on the contact stiffness of parsph.contact (Hertz's with the "
+                                             "bodies' moduli at 1; raise it where the pressure is a sizeable "
+                                             "fraction of the modulus, for less overlap and a shorter step)"),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",

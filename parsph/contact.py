@@ -12,7 +12,7 @@ configuration, and pushes apart along x_j - x_i with
     1D: F = A delta / (r_i / M_i + r_j / M_j)  (the two half-slabs of the contact radii in
                                                 series: the bar's own stiffness, cross-section A)
 with 1/E* = (1 - nu_i^2) / E_i + (1 - nu_j^2) / E_j and M the P-wave modulus of uniaxial
-strain. Its potential, F delta / (k + 1) for F proportional to delta^k, is the contact
+strain, each times the entry's `stiffness` factor (1 by default). Its potential, F delta / (k + 1) for F proportional to delta^k, is the contact
 energy (half of it for each particle), part of the total energy. The stiffness
 dF/ddelta of each pair enters the stable time step as a spring
 (formulations.tlsph.stable_time_step): of each overlapping pair in 3D (where it grows
@@ -66,6 +66,7 @@ class Contact:
         self.entry_of = np.full((count, count), -1, np.int64)  # body pair -> entry
         for k, (a, b) in enumerate(self.entries):
             self.entry_of[a, b] = self.entry_of[b, a] = k
+        self.factor = np.array([s["stiffness"] for s in specs])
         touching = np.zeros(count, bool)
         touching[[b for pair in self.entries for b in pair]] = True
         factor = np.zeros(count)
@@ -100,8 +101,8 @@ class Contact:
             self._refresh(x)
         self.x[: self.n] = x
         _repulsion(self.n, self.ptr, self.idx, self.x, self.radius_all, self.modulus_all, self.body_all,
-                   self.entry_of, self.mass, self.dim, self.scale, self.skin, self.force, self.energy, self.omega2,
-                   self.entry_force, self.closest)
+                   self.entry_of, self.factor, self.mass, self.dim, self.scale, self.skin, self.force, self.energy,
+                   self.omega2, self.entry_force, self.closest)
 
     def _moved(self, x: np.ndarray) -> float:
         """The largest displacement of a contact particle of any rank since the lists were made."""
@@ -169,8 +170,8 @@ class Contact:
 
 
 @njit(cache=True, _nrt=False)
-def _repulsion(n, ptr, idx, x, radius, modulus, body, entry_of, mass, dim, scale, skin, force, energy, omega2,
-               entry_force, closest):
+def _repulsion(n, ptr, idx, x, radius, modulus, body, entry_of, factor, mass, dim, scale, skin, force, energy,
+               omega2, entry_force, closest):
     """The contact force, energy (half of each pair's potential), spring bound
     2 sum_j dF/ddelta / m_i (of the pairs closer than the contact distance plus the skin in
     1D and 2D) and closest approach of the owned particles 0..n-1, and the
@@ -194,23 +195,24 @@ def _repulsion(n, ptr, idx, x, radius, modulus, body, entry_of, mass, dim, scale
             reach = radius[i] + radius[j]
             closest[i] = min(closest[i], r / reach)
             delta = reach - r
+            entry = entry_of[body[i], body[j]]
             if dim < 3 and delta > -skin:
                 if dim == 2:
-                    k = 0.25 * math.pi * scale / (1.0 / modulus[i] + 1.0 / modulus[j])
+                    k = factor[entry] * 0.25 * math.pi * scale / (1.0 / modulus[i] + 1.0 / modulus[j])
                 else:
-                    k = scale / (radius[i] / modulus[i] + radius[j] / modulus[j])
+                    k = factor[entry] * scale / (radius[i] / modulus[i] + radius[j] / modulus[j])
                 omega2[i] += 2.0 * k / mass[i]
             if not delta > 0.0:
                 continue
             if dim == 3:
-                k = 4.0 / 3.0 * math.sqrt(radius[i] * radius[j] / reach) / (1.0 / modulus[i] + 1.0 / modulus[j])
+                k = factor[entry] * 4.0 / 3.0 * math.sqrt(radius[i] * radius[j] / reach) / (1.0 / modulus[i]
+                                                                                          + 1.0 / modulus[j])
                 f = k * delta * math.sqrt(delta)
                 omega2[i] += 2.0 * 1.5 * k * math.sqrt(delta) / mass[i]
                 energy[i] += 0.5 * 0.4 * f * delta
             else:
                 f = k * delta
                 energy[i] += 0.5 * 0.5 * f * delta
-            entry = entry_of[body[i], body[j]]
             for a in range(dim):
                 push = -f * (x[j, a] - x[i, a]) / r  # away from j
                 force[i, a] += push

@@ -30,8 +30,8 @@ def pair_energy_and_forces(x: np.ndarray, dim: int) -> tuple:
     idx = np.array([1, 0])
     force, energy, omega2, closest = np.zeros((2, dim)), np.zeros(2), np.zeros(2), np.zeros(2)
     entry_force = np.zeros((1, 2, dim))
-    _repulsion(2, ptr, idx, x, radius, modulus, body, entry_of, mass, dim, 0.01, 1e-4, force, energy, omega2,
-               entry_force, closest)
+    _repulsion(2, ptr, idx, x, radius, modulus, body, entry_of, np.array([3.0]), mass, dim, 0.01, 1e-4, force,
+               energy, omega2, entry_force, closest)
     return energy.sum(), force, entry_force
 
 
@@ -119,6 +119,28 @@ def test_two_rings_colliding_rise_as_one_ring_against_the_symmetry_plane():
     for a in "xy":
         assert np.abs(pair[f"momentum_{a}"]).max() < 1e-14 * impact
     assert np.abs(pair["total_energy"] - pair["total_energy"][0]).max() < 1e-3 * impact
+
+
+@pytest.mark.parametrize("alpha", [50.0, 0.0])
+def test_block_pressed_between_rigid_particle_plates_stays_ordered_only_with_hourglass_control(alpha):
+    """runs/punch_hertz.toml at 10 particles over the block's height ([G §4.3, Fig. 7]): the
+    plates squeeze it to half its height without passing through it (no two particles of a
+    plate and the block closer than 0.7 of their contact distance), the two plates' forces
+    balance to 10 %, the kinetic energy stays below 1 % of the strain energy, the
+    energy balance closes to 1e-4 of the plates' work; with alpha = 50 the particles stay
+    ordered (smallest spacing ratio 0.88), without they pair up (0.16)."""
+    sim = simulation("punch_hertz", ["parameters.spacing=3e-4", f"formulation.hourglass={alpha}"])
+    h = run_until(sim, 1.5e-4, every=200)
+    assert h["height"][-1] < 0.5 * 3.0e-3
+    assert h["contact_closest"].min() > 0.7
+    top, bottom = h["contact_force_y.block.top"][-1], h["contact_force_y.block.bottom"][-1]
+    assert top < 0 < bottom and abs(top + bottom) < 0.1 * bottom
+    assert h["kinetic_energy"][-1] < 0.01 * h["strain_energy"][-1]
+    assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-4 * h["external_work"][-1]
+    if alpha > 0:
+        assert h["spacing_ratio_min"][-1] > 0.8
+    else:
+        assert h["spacing_ratio_min"][-1] < 0.4
 
 
 @pytest.mark.mpi
