@@ -885,8 +885,8 @@ class Simulation:
     def energy_items(self) -> dict:
         """What this rank sums for the energies of each body (arrays, or exact_sum.Exact
         running totals): strain (V^0 psi of the owned integration points), plastic work
-        (V^0 w_p), damage work (the work the particles have taken beyond their strain energy,
-        V^0 (W - psi): materials.damage), viscous work (absorbed by the artificial viscosity),
+        (V^0 w_p), damage work (the work the particles have taken beyond their strain energy
+        and plastic work, V^0 (W - psi - w_p): materials.damage), viscous work (absorbed by the artificial viscosity),
         hourglass (the particles' penalty, the work absorbed on this rank by the paper form,
         the penalty released at reference updates), contact (each particle's half of its
         pairs' potential: parsph.contact) and external work."""
@@ -898,12 +898,20 @@ class Simulation:
             out["strain"].append([b.formulation.integrated(self, b, lambda A: A["psi"])])
             out["plastic"].append([] if b.law.state != "plastic_state" else [b.formulation.integrated(
                 self, b, lambda A: A["plastic_state_trial"][:, elastoplastic.PLASTIC_WORK])])
-            out["damage"].append([] if b.failure_strain is None else
-                                 [self.volume[lo:hi] * (self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi])])
+            out["damage"].append([] if b.failure_strain is None else [self.volume[lo:hi] * self._damage_work(b)])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([self.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
             out["contact"].append([self.contact.energy[lo:hi]] if self.contact else [])
             out["external"].append([acc["external_work"]])
+        return out
+
+    def _damage_work(self, b: Body) -> np.ndarray:
+        """W - psi - w_p at `b`'s owned particles: the work they have taken (materials.damage)
+        beyond their strain energy and, with a plastic law, their plastic work (counted as such)."""
+        lo, hi = b.lo, b.hi
+        out = self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi]
+        if b.law.state == "plastic_state":
+            out = out - self.material_state(b)[1][lo:hi, elastoplastic.PLASTIC_WORK]
         return out
 
     def energy_sums(self) -> dict:
