@@ -96,7 +96,7 @@ class Contact:
         """The contact forces, energies and spring bounds at the owned particles' current
         positions x (n, dim) (collective: ghost positions, and the lists when due)."""
         if self._built_at is None or self._moved(x) > 0.5 * self.skin:
-            self._search(x)
+            self.search(x)
         else:
             self._refresh(x)
         self.x[: self.n] = x
@@ -110,7 +110,7 @@ class Contact:
         largest = float(np.sqrt(np.einsum("na,na->n", d, d).max())) if len(d) else 0.0
         return self.comm.allreduce(largest, op=MPI.MAX)
 
-    def _search(self, x: np.ndarray) -> None:
+    def search(self, x: np.ndarray) -> None:
         """Contact ghosts (the other ranks' contact particles within the largest contact
         distance plus the skin of this rank's) and candidate lists."""
         n, comm, reach = self.n, self.comm, self.distance + 2.0 * self.skin

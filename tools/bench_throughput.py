@@ -11,7 +11,10 @@ and the Eulerian kernel for SPH, RLM, KBM and nodal EFG (neighbours searched at 
 30 steps, shape functions rebuilt at every step; timed over a quarter of the steps) (µs
 per particle-step counts particles only, as [R] Tables 5-6 do); and total-Lagrangian with
 alpha = 50 (paper form) with the J2 elasto-plastic law (the return mapping's eigen
-decomposition runs at every particle whether it yields or not) and with tensile damage. Each updated row also gives
+decomposition runs at every particle whether it yields or not) and with tensile damage; and
+total-Lagrangian with alpha = 50 (paper form) as two bodies, the block's halves, in
+contact across the middle (parsph.contact), against the same block as one body, with the
+time of one contact search (ghosts and candidate lists) per particle. Each updated row also gives
 the time of one reference update per particle. Compile time and set-up are excluded; each
 case is timed over --steps steps after a warm-up. Prints a table and writes it as JSON.
 
@@ -69,8 +72,22 @@ def block(*args, **kwargs) -> dict:
     return config.validate(raw_block(*args, **kwargs))
 
 
+def halves_in_contact(raw: dict) -> dict:
+    """The block's scene as two bodies, its halves x < 1/2 and x > 1/2, in contact."""
+    part = raw["geometry"].pop("parts")[0]
+    halves = []
+    for k, (lo, hi) in enumerate(((0.0, 0.5), (0.5, 1.0))):
+        box = dict(part, lower=[lo] + part["lower"][1:], upper=[hi] + part["upper"][1:])
+        halves.append({"name": f"half{k}", "parts": [box], "material": raw.pop("material") if k == 0 else
+                       dict(halves[0]["material"])})
+    raw["bodies"] = halves
+    raw["contact"] = [{"bodies": ["half0", "half1"]}]
+    return raw
+
+
 def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph", law=""):
-    scene = block(dim, particles, alpha, form, eta, every, method, law)
+    raw = raw_block(dim, particles, alpha, form, eta, every, method, "" if law == "contact" else law)
+    scene = config.validate(halves_in_contact(raw) if law == "contact" else raw)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
@@ -83,6 +100,12 @@ def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"
     n = sim.n_owned
     pairs = int(sim.ref.ptr[-1])
     update = sim.stage_seconds.get("reference update", 0.0) / max(sim.updates, 1)
+    if sim.contact:  # a contact search, timed alone
+        x = sim.X[:n] + sim.u[:n]
+        start = time.perf_counter()
+        for _ in range(5):
+            sim.contact.search(x)
+        update = (time.perf_counter() - start) / 5
     return {"method": method + (f" + {law}" if law else ""), "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
             "hourglass_form": form if alpha > 0 else "-", "eta": eta, "update_every": every,
             "steps": steps, "us_per_particle_step": 1e6 * seconds / (steps * n),
@@ -98,7 +121,7 @@ CASES = (("tlsph", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0)
          ("efg_cells", 0.0, "variational", 0.0, 0), ("sph_eulerian", 0.0, "variational", 0.0, 0),
          ("rlm_eulerian", 0.0, "variational", 0.0, 0), ("kbm_eulerian", 0.0, "variational", 0.0, 0),
          ("efg_eulerian", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0, "j2_plasticity"),
-         ("tlsph", 50.0, "paper", 0.0, 0, "damage"))
+         ("tlsph", 50.0, "paper", 0.0, 0, "damage"), ("tlsph", 50.0, "paper", 0.0, 0, "contact"))
 NAMES = {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM", "efg": "EFG nodal", "efg_cells": "EFG cells",
          "sph_eulerian": "SPH Eul.", "rlm_eulerian": "RLM Eul.", "kbm_eulerian": "KBM Eul.",
          "efg_eulerian": "EFG Eul."}
@@ -122,7 +145,8 @@ def main():
                   f"alpha {r['alpha']:4.0f} {r['hourglass_form']:11s} eta {eta:3.1f}  "
                   f"{r['us_per_particle_step']:.3f} us/particle-step"
                   + (f"  (an update {r['us_per_particle_update']:.2f} us/particle)" if r["update_every"]
-                     or method.endswith("_eulerian") else ""),
+                     or method.endswith("_eulerian") else "")
+                  + (f"  (a search {r['us_per_particle_update']:.2f} us/particle)" if law == ["contact"] else ""),
                   flush=True)
     os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
     with open(args.json, "w") as fh:

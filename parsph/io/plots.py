@@ -60,9 +60,8 @@ def plot_history(path: str, names: list, output: str | None) -> str:
 
 def plot_snapshots(path: str, field: str, count: int, output: str | None, limits=None) -> str:
     """Particle clouds coloured by `field` at `count` times spread over the run (one: the
-    last snapshot; 2D: x-y;
-    3D: x-z projection), side by side, or one above the other for a body more than twice
-    as wide as it is tall."""
+    last snapshot; 2D: x-y; 3D: x-z projection), on one scale, side by side, or one above
+    the other for a body more than twice as wide as it is tall."""
     plt = _pyplot()
     with h5py.File(path, "r") as f:
         steps = sorted(k for k in f if k.startswith("step_"))
@@ -87,8 +86,13 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None, limits
         size = (3.2 * len(frames), 4) if len(frames) > 1 else (6.4, 4.5)
         fig, axes = plt.subplots(1, len(frames), figsize=size, squeeze=False)
         axes = axes[0]
+    span = [(min(x[:, k].min() for _, x, _ in frames), max(x[:, k].max() for _, x, _ in frames))
+            for k in (0, vertical)]
+    margin = [0.03 * (b - a) for a, b in span]
     for ax, (t, x, _), v in zip(axes, frames, values):
         sc = ax.scatter(x[:, 0], x[:, vertical], c=v, s=4, vmin=lo, vmax=hi, cmap="viridis")
+        ax.set_xlim(span[0][0] - margin[0], span[0][1] + margin[0])  # one scale for every frame
+        ax.set_ylim(span[1][0] - margin[1], span[1][1] + margin[1])
         ax.set_aspect("equal")
         ax.set_title(f"t = {t:.4g} s", fontsize=9)
         ax.tick_params(labelsize=7)
