@@ -302,6 +302,9 @@ CONTACT_KEYS = {
     "stiffness": Key("float", 1.0, positive, "factor on the contact stiffness of parsph.contact (Hertz's with the "
                                              "bodies' moduli at 1; raise it where the pressure is a sizeable "
                                              "fraction of the modulus, for less overlap and a shorter step)"),
+    "restitution": Key("float", 1.0, in_range(0.0, 1.0),
+                       "coefficient of restitution of a pair's normal impact (a dashpot; 1: none)"),
+    "friction": Key("float", 0.0, non_negative, "Coulomb friction coefficient between the two bodies"),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",

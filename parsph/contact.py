@@ -12,13 +12,25 @@ configuration, and pushes apart along x_j - x_i with
     1D: F = A delta / (r_i / M_i + r_j / M_j)  (the two half-slabs of the contact radii in
                                                 series: the bar's own stiffness, cross-section A)
 with 1/E* = (1 - nu_i^2) / E_i + (1 - nu_j^2) / E_j and M the P-wave modulus of uniaxial
-strain, each times the entry's `stiffness` factor (1 by default). Its potential, F delta / (k + 1) for F proportional to delta^k, is the contact
-energy (half of it for each particle), part of the total energy. The stiffness
-dF/ddelta of each pair enters the stable time step as a spring
-(formulations.tlsph.stable_time_step): of each overlapping pair in 3D (where it grows
-from zero with the overlap), of each pair closer than its contact distance plus the skin
-in 1D and 2D (a linear spring: the step that brings a pair into contact must be stable
-for it too).
+strain, each times the entry's `stiffness` factor (1 by default). Its potential,
+F delta / (k + 1) for F proportional to delta^k, is the contact energy (half of it for
+each particle), part of the total energy. The stiffness dF/ddelta of each pair enters the
+stable time step as a spring (formulations.tlsph.stable_time_step): of each overlapping
+pair in 3D (where it grows from zero with the overlap), of each pair closer than its
+contact distance plus the skin in 1D and 2D (a linear spring: the step that brings a pair
+into contact must be stable for it too).
+
+Optionally dissipative, per [[contact]] entry, with the pairs' relative velocity
+v_ij = v_j - v_i (the step's mid-point velocities) and the effective mass
+m* = m_i m_j / (m_i + m_j):
+  - damping (`restitution` e < 1): a normal dashpot c (v_ij . n) n on i, c = 2 zeta
+    sqrt(k m*), k = dF/ddelta, zeta = -ln e / sqrt(pi^2 + ln^2 e) (the restitution of a
+    linear spring-dashpot), never pulling the pair together (at most the elastic force);
+  - Coulomb friction (`friction` mu): along the tangential relative velocity v_t, of size
+    min(mu |F_n|, m* |v_t| / dt), so that friction never reverses a pair's sliding
+    within the step (sticking without a regularising speed).
+Their work, accumulated over each step (trapezoidal rule), is the contact work, part of
+the balance; the dashpot shortens the stable step by (sqrt(1 + zeta^2) - zeta).
 
 The pairs are found in the current configuration with a skin s of half the largest contact
 distance: candidate lists (the pairs within their contact distance plus 2 s; rows: owned
@@ -67,6 +79,14 @@ class Contact:
         for k, (a, b) in enumerate(self.entries):
             self.entry_of[a, b] = self.entry_of[b, a] = k
         self.factor = np.array([s["stiffness"] for s in specs])
+        restitution = np.array([s["restitution"] for s in specs])
+        with np.errstate(divide="ignore"):
+            logs = -np.log(restitution)
+        self.zeta = np.where(restitution < 1.0, logs / np.sqrt(np.pi ** 2 + logs ** 2), 0.0)
+        self.zeta[restitution == 0.0] = 1.0
+        self.friction = np.array([s["friction"] for s in specs])
+        self.dissipative = bool((self.zeta > 0).any() or (self.friction > 0).any())
+        self.dt = math.inf  # the step the forces are for (the friction's limit)
         touching = np.zeros(count, bool)
         touching[[b for pair in self.entries for b in pair]] = True
         factor = np.zeros(count)
@@ -85,6 +105,7 @@ class Contact:
         self.distance = 2.0 * comm.allreduce(largest, op=MPI.MAX)  # the largest contact distance
         self.skin = SKIN * self.distance
         self.force = np.zeros((n, dim))
+        self.dissipation = np.zeros((n if self.dissipative else 0, dim))  # the damping and friction forces
         self.energy = np.zeros(n)
         self.omega2 = np.zeros(n)  # the springs' bound on the squared frequency
         self.entry_force = np.zeros((len(self.entries), n, dim))  # each entry's force from the other body
@@ -92,17 +113,22 @@ class Contact:
         self.searches = 0
         self._built_at = None  # owned contact particles' positions when the lists were made
 
-    def evaluate(self, x: np.ndarray) -> None:
+    def evaluate(self, x: np.ndarray, v: np.ndarray) -> None:
         """The contact forces, energies and spring bounds at the owned particles' current
-        positions x (n, dim) (collective: ghost positions, and the lists when due)."""
+        positions x and velocities v (n, dim) (collective: ghost positions and, with
+        dissipation, velocities; the lists when due)."""
         if self._built_at is None or self._moved(x) > 0.5 * self.skin:
             self.search(x)
         else:
-            self._refresh(x)
+            self._refresh(x, self.x)
         self.x[: self.n] = x
-        _repulsion(self.n, self.ptr, self.idx, self.x, self.radius_all, self.modulus_all, self.body_all,
-                   self.entry_of, self.factor, self.mass, self.dim, self.scale, self.skin, self.force, self.energy,
-                   self.omega2, self.entry_force, self.closest)
+        if self.dissipative:
+            self._refresh(v, self.v)
+            self.v[: self.n] = v
+        _repulsion(self.n, self.ptr, self.idx, self.x, self.v, self.radius_all, self.modulus_all, self.mass_all,
+                   self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt, self.dim,
+                   self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2, self.entry_force,
+                   self.closest)
 
     def _moved(self, x: np.ndarray) -> float:
         """The largest displacement of a contact particle of any rank since the lists were made."""
@@ -127,7 +153,8 @@ class Contact:
             sel = mine[np.einsum("na,na->n", gap, gap) <= reach * reach]
             if len(sel):
                 self.send[r] = sel
-            chunks.append((self.gid[sel], self.body[sel], self.radius[sel], self.modulus[sel]) if len(sel) else None)
+            chunks.append((self.gid[sel], self.body[sel], self.radius[sel], self.modulus[sel], self.mass[sel])
+                          if len(sel) else None)
         received = comm.alltoall(chunks) if comm.size > 1 else [None]
         self.recv = {}
         start = n
@@ -136,12 +163,13 @@ class Contact:
                 self.recv[r] = slice(start, start + len(chunk[0]))
                 start += len(chunk[0])
         parts = [c for c in received if c is not None]
-        own = (self.gid, self.body, self.radius, self.modulus)
-        self.gid_all, self.body_all, self.radius_all, self.modulus_all = (
+        own = (self.gid, self.body, self.radius, self.modulus, self.mass)
+        self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all = (
             np.concatenate([mine_k] + [c[k] for c in parts]) for k, mine_k in enumerate(own))
         self.x = np.zeros((start, self.dim))
+        self.v = np.zeros((start if self.dissipative else 0, self.dim))
         self.x[:n] = x
-        self._refresh(x)
+        self._refresh(x, self.x)
         points = np.concatenate([mine, np.arange(n, start)])
         i, j = close_pairs(self.x[points], reach)
         i, j = points[i], points[j]
@@ -159,27 +187,31 @@ class Contact:
         np.cumsum(np.bincount(i, minlength=n), out=self.ptr[1:])
         self.searches += 1
 
-    def _refresh(self, x: np.ndarray) -> None:
-        """The contact ghosts' current positions from their owners."""
+    def _refresh(self, values: np.ndarray, into: np.ndarray) -> None:
+        """The contact ghosts' rows of `into` (positions, velocities) from their owners'
+        `values`."""
         if not self.recv and not self.send:
             return
-        requests = [self.comm.Irecv(self.x[rows], source=r, tag=11) for r, rows in self.recv.items()]
-        data = [np.ascontiguousarray(x[sel]) for sel in self.send.values()]
+        requests = [self.comm.Irecv(into[rows], source=r, tag=11) for r, rows in self.recv.items()]
+        data = [np.ascontiguousarray(values[sel]) for sel in self.send.values()]
         requests += [self.comm.Isend(d, dest=r, tag=11) for r, d in zip(self.send, data)]
         MPI.Request.Waitall(requests)
 
 
 @njit(cache=True, _nrt=False)
-def _repulsion(n, ptr, idx, x, radius, modulus, body, entry_of, factor, mass, dim, scale, skin, force, energy,
-               omega2, entry_force, closest):
-    """The contact force, energy (half of each pair's potential), spring bound
-    2 sum_j dF/ddelta / m_i (of the pairs closer than the contact distance plus the skin in
-    1D and 2D) and closest approach of the owned particles 0..n-1, and the
-    force on each of them from the other body of each contact entry; the pairs' forces
-    summed in the rows' order (global ids)."""
+def _repulsion(n, ptr, idx, x, v, radius, modulus, mass, body, entry_of, factor, zeta, friction, dt, dim, scale,
+               skin, force, dissipation, energy, omega2, entry_force, closest):
+    """The contact force, its dissipative part (with damping or friction), energy (half of
+    each pair's potential), spring bound 2 sum_j dF/ddelta / m_i (of the pairs closer than
+    the contact distance plus the skin in 1D and 2D; over (sqrt(1 + zeta^2) - zeta)^2 with
+    damping) and closest approach of the owned particles 0..n-1, and the force on each of
+    them from the other body of each contact entry; the pairs' forces summed in the rows'
+    order (global ids)."""
     for i in range(n):
         for a in range(dim):
             force[i, a] = 0.0
+            if len(dissipation):
+                dissipation[i, a] = 0.0
             for k in range(entry_force.shape[0]):
                 entry_force[k, i, a] = 0.0
         energy[i] = 0.0
@@ -196,24 +228,56 @@ def _repulsion(n, ptr, idx, x, radius, modulus, body, entry_of, factor, mass, di
             closest[i] = min(closest[i], r / reach)
             delta = reach - r
             entry = entry_of[body[i], body[j]]
+            z = zeta[entry]
+            slow = 1.0 if z == 0.0 else 1.0 / (math.sqrt(1.0 + z * z) - z) ** 2  # a dashpot's shorter step
             if dim < 3 and delta > -skin:
                 if dim == 2:
                     k = factor[entry] * 0.25 * math.pi * scale / (1.0 / modulus[i] + 1.0 / modulus[j])
                 else:
                     k = factor[entry] * scale / (radius[i] / modulus[i] + radius[j] / modulus[j])
-                omega2[i] += 2.0 * k / mass[i]
+                omega2[i] += 2.0 * k / mass[i] * slow
             if not delta > 0.0:
                 continue
             if dim == 3:
                 k = factor[entry] * 4.0 / 3.0 * math.sqrt(radius[i] * radius[j] / reach) / (1.0 / modulus[i]
                                                                                           + 1.0 / modulus[j])
                 f = k * delta * math.sqrt(delta)
-                omega2[i] += 2.0 * 1.5 * k * math.sqrt(delta) / mass[i]
+                stiffness = 1.5 * k * math.sqrt(delta)
+                omega2[i] += 2.0 * stiffness / mass[i] * slow
                 energy[i] += 0.5 * 0.4 * f * delta
             else:
                 f = k * delta
+                stiffness = k
                 energy[i] += 0.5 * 0.5 * f * delta
             for a in range(dim):
                 push = -f * (x[j, a] - x[i, a]) / r  # away from j
                 force[i, a] += push
                 entry_force[entry, i, a] += push
+            if z > 0.0 or friction[entry] > 0.0:
+                _dissipate(i, j, x, v, mass, r, f, stiffness, z, friction[entry], dt, dim, force,
+                           dissipation, entry_force[entry])
+
+
+@njit(cache=True, inline="always")
+def _dissipate(i, j, x, v, mass, r, f, stiffness, z, mu, dt, dim, force, dissipation, entry_force):
+    """Add the dashpot (damping ratio z) and Coulomb friction (mu) of pair (i, j) to
+    particle i's force (elastic force f, stiffness dF/ddelta)."""
+    m = mass[i] * mass[j] / (mass[i] + mass[j])
+    closing = 0.0  # v_ij . n, n from i to j
+    for a in range(dim):
+        closing += (v[j, a] - v[i, a]) * (x[j, a] - x[i, a]) / r
+    damp = min(2.0 * z * math.sqrt(stiffness * m) * closing, f)  # along n; never attractive
+    normal = f - damp  # the size of the normal force on i, away from j
+    sliding = 0.0
+    for a in range(dim):
+        t = v[j, a] - v[i, a] - closing * (x[j, a] - x[i, a]) / r
+        sliding += t * t
+    sliding = math.sqrt(sliding)
+    stop = m * sliding / dt if dt < math.inf else math.inf  # what stops the sliding within the step
+    drag = 0.0 if sliding == 0.0 else min(mu * normal, stop) / sliding
+    for a in range(dim):
+        n_a = (x[j, a] - x[i, a]) / r
+        extra = damp * n_a + drag * (v[j, a] - v[i, a] - closing * n_a)
+        force[i, a] += extra
+        dissipation[i, a] += extra
+        entry_force[i, a] += extra

@@ -6,11 +6,12 @@ Disorder: the mass-weighted RMS and the maximum of the hourglass error eta_i
 (dissipated), damage work (taken by damaged and failed particles beyond their strain
 energy: materials.damage), viscous work (absorbed by the artificial viscosity), hourglass
 (minus the work done by the hourglass forces), contact (the potential of the contact
-between bodies: parsph.contact), external work (body force, constraint reactions,
-obstacles' contact and the work that changes the kinetic energy of prescribed motions) and
-the balance total = kinetic + strain + plastic + damage + viscous + hourglass + contact
-- external, which is constant for an exact integration. Momenta: linear (vector) and
-angular (scalar in 2D, vector in 3D).
+between bodies: parsph.contact), contact work (absorbed by its damping and friction),
+external work (body force, constraint reactions, obstacles' contact and the work that
+changes the kinetic energy of prescribed motions) and the balance total = kinetic +
+strain + plastic + damage + viscous + hourglass + contact + contact work - external, which
+is constant for an exact integration. Momenta: linear (vector) and angular (scalar in 2D,
+vector in 3D).
 """
 
 from __future__ import annotations
@@ -127,7 +128,7 @@ def global_parts(state, reduction: RowReduction):
     columns = particle_columns(state.mass, state.v, state.X, state.u, eta)
     energies = state.energy_items()
     bodies = state.bodies
-    keys = ("strain", "plastic", "damage", "viscous", "hourglass", "contact", "external")
+    keys = ("strain", "plastic", "damage", "viscous", "hourglass", "contact", "contact_work", "external")
     start = reduction.add_sums([columns])
     terms = {key: [(reduction.add_sums(body), len(body)) for body in energies[key]] for key in keys}
     kinetic_at = reduction.add_sums([columns[b.lo:b.hi, 2:2 + dim] for b in bodies]) if len(bodies) > 1 else 0
@@ -139,23 +140,25 @@ def global_parts(state, reduction: RowReduction):
         weighted, mass, kinetic, momentum, angular = (
             parts[start], parts[start + 1], parts[start + 2:start + 2 + dim],
             parts[start + 2 + dim:start + 2 + 2 * dim], parts[start + 2 + 2 * dim:start + columns.shape[1]])
-        strain, plastic, damaged, viscous, hourglass, contact, external = (
+        strain, plastic, damaged, viscous, hourglass, contact, contact_work, external = (
             [sum(parts[k:k + size], Exact(0)) for k, size in terms[key]] for key in keys)
         per_body_kinetic = parts[kinetic_at:kinetic_at + dim * count]
         kinetic = sum(kinetic[1:], kinetic[0])
-        strain_all, plastic_all, damage_all, viscous_all, hourglass_all, contact_all, external_all = (
-            sum(e[1:], e[0]) for e in (strain, plastic, damaged, viscous, hourglass, contact, external))
+        strain_all, plastic_all, damage_all, viscous_all, hourglass_all, contact_all, contact_work_all, external_all = (
+            sum(e[1:], e[0]) for e in (strain, plastic, damaged, viscous, hourglass, contact, contact_work, external))
         out = {
             "kinetic_energy": float(kinetic), "strain_energy": float(strain_all), "plastic_work": float(plastic_all),
             "damage_work": float(damage_all), "viscous_work": float(viscous_all),
             "hourglass_energy": float(hourglass_all), "external_work": float(external_all),
             "total_energy": float(kinetic + strain_all + plastic_all + damage_all + viscous_all + hourglass_all
-                                  + contact_all - external_all),
+                                  + contact_all + contact_work_all - external_all),
             "disorder": math.sqrt(float(weighted) / float(mass)),
             "disorder_max": reduction.maxima[top],
         }
         if state.contact:
             out["contact_energy"] = float(contact_all)
+            if state.contact.dissipative:
+                out["contact_work"] = float(contact_work_all)
         for a, name in enumerate("xyz"[:dim]):
             out[f"momentum_{name}"] = float(momentum[a])
         if dim == 2:
@@ -175,8 +178,10 @@ def global_parts(state, reduction: RowReduction):
                 out[f"external_work.{b.name}"] = float(external[k])
                 if state.contact:
                     out[f"contact_energy.{b.name}"] = float(contact[k])
+                    if state.contact.dissipative:
+                        out[f"contact_work.{b.name}"] = float(contact_work[k])
                 out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + viscous[k]
-                                                      + hourglass[k] + contact[k] - external[k])
+                                                      + hourglass[k] + contact[k] + contact_work[k] - external[k])
         return out
 
     return values

@@ -78,7 +78,7 @@ def bytes_per_point(name: str, dim: int) -> int:
 HISTORY = {
     "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
     "strain_energy": "J", "plastic_work": "J", "damage_work": "J", "viscous_work": "J", "hourglass_energy": "J",
-    "external_work": "J", "total_energy": "J", "contact_energy": "J", "contact_closest": "1",
+    "external_work": "J", "total_energy": "J", "contact_energy": "J", "contact_work": "J", "contact_closest": "1",
     "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
 HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),

@@ -52,6 +52,7 @@ BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
 UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
 TOTALS = ("hourglass_work",  # absorbed by the "paper" hourglass forces
           "viscous_work",  # absorbed by the artificial viscosity
+          "contact_work",  # absorbed by contact damping and friction
           "hourglass_released",  # penalty dropped at reference updates
           "external_work")
 
@@ -422,12 +423,13 @@ class Simulation:
         dt, strain, smallest = np.inf, 0.0, -1
         ref = self.ref
         for b in self.bodies:  # in row order: the first particle with the smallest step
-            if b.rigid:  # no strain: its contact springs count at the particles they push
-                continue
-            step, worst, first = tlsph.stable_time_step(
-                b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
-                b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
-                b.formulation.hourglass_form, self.omega_c2, self.scratch33)
+            if b.rigid:
+                step, worst, first = self._rigid_step(b)
+            else:
+                step, worst, first = tlsph.stable_time_step(
+                    b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
+                    b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
+                    b.formulation.hourglass_form, self.omega_c2, self.scratch33)
             strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
@@ -437,9 +439,11 @@ class Simulation:
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
         if -reduced[0] == math.inf:
+            why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in self.bodies)
+                   else "every particle has failed completely (damage 1) and carries no stress; the run is stopped, "
+                        "as nothing is left to integrate")
             error = ParsphError(f"no particle sets the stable time step at step {self.step_count}, t = {self.t:.6g} s: "
-                                "every particle has failed completely (damage 1) and carries no stress; the run "
-                                "is stopped, as nothing is left to integrate")
+                                f"{why}")
             error.agreed = True  # the same reduction on every rank
             raise error
         if not -reduced[0] > self._floor:
@@ -459,6 +463,21 @@ class Simulation:
             error.agreed = True  # every rank found the same particle and raises this
             raise error
         return -reduced[0], reduced[1]
+
+    def _rigid_step(self, b: Body) -> tuple:
+        """(stable step, 0, its particle) of a rigid body: no strain; its particles' contact
+        springs, and no particle moving more than a quarter of the contact skin in a step
+        (so that its contacts are seen coming); (inf, 0, -1) if nothing bounds it."""
+        if self.contact is None or b.hi == b.lo:
+            return np.inf, 0.0, -1
+        springs = self.omega_c2[b.lo:b.hi]
+        speed = np.sqrt(np.einsum("na,na->n", self.v[b.lo:b.hi], self.v[b.lo:b.hi]))
+        steps = np.full(b.hi - b.lo, np.inf)
+        np.divide(2.0, np.sqrt(springs), out=steps, where=springs > 0)
+        np.minimum(steps, np.divide(0.25 * self.contact.skin, speed, out=np.full_like(speed, np.inf), where=speed > 0),
+                   out=steps)
+        first = int(np.argmin(steps))
+        return (steps[first], 0.0, b.lo + first) if steps[first] < np.inf else (np.inf, 0.0, -1)
 
     def _advice(self) -> str:
         """What to change when the run has become unstable."""
@@ -503,7 +522,7 @@ class Simulation:
         if self.contact:
             t0 = clock()
             try:
-                self.contact.evaluate(self.X[:n] + self.u[:n])
+                self.contact.evaluate(self.X[:n] + self.u[:n], self.v[:n])
             except ArithmeticError:
                 raise ParsphError(f"contact failed at step {self.step_count + 1}, t = {self.t:.6g}: particles of "
                                   f"two bodies coincide; the run is unstable: {self._advice()}") from None
@@ -578,6 +597,10 @@ class Simulation:
         v_old = self.v[:n].copy() if self.bcs.moving or self.collocation else None
         f_hg_old = self.f_hg.copy()
         f_visc_old = self.f_visc.copy()
+        dissipating = self.contact is not None and self.contact.dissipative
+        if dissipating:
+            f_cd_old = self.contact.dissipation.copy()
+            self.contact.dt = dt
         f_ext_old = self._external
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t + 0.5 * dt)
@@ -604,6 +627,10 @@ class Simulation:
             work = -0.5 * (f_visc_old + self.f_visc) * du
             for b in self.bodies:
                 self.totals["viscous_work"][b.index].add(work[b.lo:b.hi])
+        if dissipating:  # and by contact damping and friction
+            work = -0.5 * (f_cd_old + self.contact.dissipation) * du
+            for b in self.bodies:
+                self.totals["contact_work"][b.index].add(work[b.lo:b.hi])
         self._external = self.external_force()
         work = 0.5 * (f_ext_old + self._external) * du
         if self.walls.items:
@@ -889,9 +916,10 @@ class Simulation:
         and plastic work, V^0 (W - psi - w_p): materials.damage), viscous work (absorbed by the artificial viscosity),
         hourglass (the particles' penalty, the work absorbed on this rank by the paper form,
         the penalty released at reference updates), contact (each particle's half of its
-        pairs' potential: parsph.contact) and external work."""
+        pairs' potential: parsph.contact), contact work (absorbed by contact damping and
+        friction) and external work."""
         out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "contact": [],
-               "external": []}
+               "contact_work": [], "external": []}
         for b in self.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
@@ -902,6 +930,7 @@ class Simulation:
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([self.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
             out["contact"].append([self.contact.energy[lo:hi]] if self.contact else [])
+            out["contact_work"].append([acc["contact_work"]] if self.contact and self.contact.dissipative else [])
             out["external"].append([acc["external_work"]])
         return out
 

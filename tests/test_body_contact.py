@@ -20,8 +20,9 @@ from conftest import RUNS, assert_identical_outputs, parsph
 WAVE_SPEED = math.sqrt(200.0e9 / 7850.0)  # the bars' (nu = 0)
 
 
-def pair_energy_and_forces(x: np.ndarray, dim: int) -> tuple:
-    """Contact energy and forces of two particles of two bodies at x (2, dim)."""
+def pair_energy_and_forces(x: np.ndarray, dim: int, v=None, zeta=0.0, mu=0.0, dt=math.inf) -> tuple:
+    """Contact energy, forces and their dissipative parts of two particles of two bodies
+    at x (2, dim) moving at v (damping ratio zeta, friction mu, step dt)."""
     radius = np.array([0.5e-3, 0.7e-3])
     modulus = np.array([2.0e11, 7.0e10])
     body = np.array([0, 1])
@@ -29,11 +30,13 @@ def pair_energy_and_forces(x: np.ndarray, dim: int) -> tuple:
     mass = np.array([1e-3, 2e-3])
     ptr = np.array([0, 1, 2])
     idx = np.array([1, 0])
+    v = np.zeros((2, dim)) if v is None else v
     force, energy, omega2, closest = np.zeros((2, dim)), np.zeros(2), np.zeros(2), np.zeros(2)
+    dissipation = np.zeros((2, dim))
     entry_force = np.zeros((1, 2, dim))
-    _repulsion(2, ptr, idx, x, radius, modulus, body, entry_of, np.array([3.0]), mass, dim, 0.01, 1e-4, force,
-               energy, omega2, entry_force, closest)
-    return energy.sum(), force, entry_force
+    _repulsion(2, ptr, idx, x, v, radius, modulus, mass, body, entry_of, np.array([3.0]), np.array([zeta]),
+               np.array([mu]), dt, dim, 0.01, 1e-4, force, dissipation, energy, omega2, entry_force, closest)
+    return energy.sum(), force, entry_force, dissipation
 
 
 @pytest.mark.parametrize("dim", [1, 2, 3])
@@ -46,7 +49,7 @@ def test_pair_force_is_the_gradient_of_the_contact_energy_and_pairs_push_equally
     direction /= np.linalg.norm(direction)
     x = np.zeros((2, dim))
     x[1] = 0.9 * 1.2e-3 * direction
-    energy, force, entry_force = pair_energy_and_forces(x, dim)
+    energy, force, entry_force, _ = pair_energy_and_forces(x, dim)
     assert energy > 0
     assert np.array_equal(force[0], -force[1])
     assert np.array_equal(entry_force[0], force)
@@ -59,8 +62,34 @@ def test_pair_force_is_the_gradient_of_the_contact_energy_and_pairs_push_equally
         gradient = (pair_energy_and_forces(up, dim)[0] - pair_energy_and_forces(down, dim)[0]) / (2 * eps)
         assert force[0, a] == pytest.approx(-gradient, rel=1e-5, abs=1e-9 * np.abs(force).max())
     x[1] = 1.01 * 1.2e-3 * direction  # apart: no force, no energy
-    energy, force, _ = pair_energy_and_forces(x, dim)
+    energy, force, _, _ = pair_energy_and_forces(x, dim)
     assert energy == 0 and not force.any()
+
+
+def test_contact_damping_and_friction_of_a_pair():
+    """2D, overlapping along y: approaching, the dashpot adds c v_n with c = 2 zeta
+    sqrt(k m*) to the repulsion; separating fast, it never turns the force attractive;
+    sliding, friction is mu times the normal force against the sliding; slowly sliding, it
+    is what stops the sliding within the step; the pair's forces are exact opposites."""
+    x = np.array([[0.0, 0.0], [0.0, 1.0e-3]])  # overlap 0.2 mm of the contact distance 1.2 mm
+    k = 3.0 * 0.25 * math.pi * 0.01 / (1 / 2.0e11 + 1 / 7.0e10)  # stiffness factor 3, thickness 0.01
+    elastic = k * 0.2e-3
+    m = 1e-3 * 2e-3 / 3e-3
+    zeta = 0.3
+    v = np.array([[0.0, 0.5], [0.0, -0.5]])  # closing at 1 m/s
+    _, force, _, dissipation = pair_energy_and_forces(x, 2, v, zeta=zeta)
+    c = 2 * zeta * math.sqrt(k * m)
+    assert force[0, 1] == pytest.approx(-elastic - c * 1.0, rel=1e-12)
+    assert np.array_equal(force[0], -force[1]) and np.array_equal(dissipation[0], -dissipation[1])
+    _, force, _, _ = pair_energy_and_forces(x, 2, -1e3 * v, zeta=zeta)  # parting fast
+    assert force[0, 1] == 0.0
+    sliding = np.array([[0.0, 0.0], [2.0, 0.0]])  # j slides along x past i
+    _, force, _, dissipation = pair_energy_and_forces(x, 2, sliding, mu=0.4, dt=1e-9)
+    assert force[0, 0] == pytest.approx(0.4 * elastic, rel=1e-12) and dissipation[0, 1] == 0.0
+    assert np.array_equal(force[0], -force[1])
+    creeping = np.array([[0.0, 0.0], [1e-9, 0.0]])
+    _, force, _, _ = pair_energy_and_forces(x, 2, creeping, mu=0.4, dt=1e-6)
+    assert force[0, 0] == pytest.approx(m * 1e-9 / 1e-6, rel=1e-9)
 
 
 @pytest.mark.parametrize("spacing", [2.0e-3, 1.0e-3])
@@ -120,6 +149,20 @@ def test_two_rings_colliding_rise_as_one_ring_against_the_symmetry_plane():
     for a in "xy":
         assert np.abs(pair[f"momentum_{a}"]).max() < 1e-14 * impact
     assert np.abs(pair["total_energy"] - pair["total_energy"][0]).max() < 1e-3 * impact
+
+
+def test_colliding_rings_with_damping_and_friction_keep_the_balance():
+    """rings_contact with restitution 0.5 and friction 0.3: the contact absorbs a few per
+    cent of the kinetic energy (contact_work), the balance including it closes to 1e-3 of
+    the impact's kinetic energy, momentum stays to round-off, the rings still part."""
+    h = run_until(simulation("rings_contact", ["contact.0.restitution=0.5", "contact.0.friction=0.3"]), 0.05,
+                  every=8)
+    impact = h["kinetic_energy"][0]
+    assert 0.01 * impact < h["contact_work"][-1] < 0.1 * impact
+    assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-3 * impact
+    for a in "xy":
+        assert np.abs(h[f"momentum_{a}"]).max() < 1e-14 * impact
+    assert h["gap"][-1] < -0.005
 
 
 @pytest.mark.parametrize("alpha", [50.0, 0.0])
@@ -199,7 +242,9 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     ('bodies = ["left"]', "contact[0].bodies must name two bodies"),
     ('bodies = ["left", "right"]\nradius = 0.0', "contact[0].radius must be > 0"),
     ('bodies = ["left", "right"]\nradius = 2.0', "contact[0].radius = 2 exceeds kernel.support = 1.5"),
-    ('bodies = ["left", "right"]\nfriction = 0.1', "unknown key 'contact[0].friction'"),
+    ('bodies = ["left", "right"]\nfriction = -0.1', "contact[0].friction must be >= 0"),
+    ('bodies = ["left", "right"]\nrestitution = 1.5', "contact[0].restitution must be in [0.0, 1.0]"),
+    ('bodies = ["left", "right"]\nfricton = 0.1', "unknown key 'contact[0].fricton'"),
 ])
 def test_bad_contact_settings_are_refused(contact, message):
     text = (RUNS / "bars_impact.toml").read_text()
