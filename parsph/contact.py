@@ -63,6 +63,15 @@ def contact_modulus(c, dim: int) -> float:
     return 4.0 * c.mu * (c.lam + c.mu) / (c.lam + 2.0 * c.mu) if c.mu > 0 else c.bulk
 
 
+def damping_ratio(restitution: float) -> float:
+    """The damping ratio of a linear spring-dashpot whose impact has this coefficient of
+    restitution e: zeta = -ln e / sqrt(pi^2 + ln^2 e) (1 for e = 0, 0 for e = 1)."""
+    if restitution <= 0.0:
+        return 1.0
+    log = -math.log(restitution)
+    return log / math.sqrt(math.pi ** 2 + log ** 2)
+
+
 class Contact:
     """The scene's contact pairs of bodies, on this rank's particles."""
 
@@ -79,11 +88,7 @@ class Contact:
         for k, (a, b) in enumerate(self.entries):
             self.entry_of[a, b] = self.entry_of[b, a] = k
         self.factor = np.array([s["stiffness"] for s in specs])
-        restitution = np.array([s["restitution"] for s in specs])
-        with np.errstate(divide="ignore"):
-            logs = -np.log(restitution)
-        self.zeta = np.where(restitution < 1.0, logs / np.sqrt(np.pi ** 2 + logs ** 2), 0.0)
-        self.zeta[restitution == 0.0] = 1.0
+        self.zeta = np.array([damping_ratio(s["restitution"]) for s in specs])
         self.friction = np.array([s["friction"] for s in specs])
         self.dissipative = bool((self.zeta > 0).any() or (self.friction > 0).any())
         self.dt = math.inf  # the step the forces are for (the friction's limit)
@@ -110,7 +115,6 @@ class Contact:
         self.omega2 = np.zeros(n)  # the springs' bound on the squared frequency
         self.entry_force = np.zeros((len(self.entries), n, dim))  # each entry's force from the other body
         self.closest = np.ones(n)  # |x_ij| / (r_i + r_j) of the closest candidate
-        self.searches = 0
         self._built_at = None  # owned contact particles' positions when the lists were made
 
     def evaluate(self, x: np.ndarray, v: np.ndarray) -> None:
@@ -185,7 +189,6 @@ class Contact:
         self.idx = j[order]
         self.ptr = np.zeros(n + 1, np.int64)
         np.cumsum(np.bincount(i, minlength=n), out=self.ptr[1:])
-        self.searches += 1
 
     def _refresh(self, values: np.ndarray, into: np.ndarray) -> None:
         """The contact ghosts' rows of `into` (positions, velocities) from their owners'

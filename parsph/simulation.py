@@ -913,11 +913,11 @@ class Simulation:
         """What this rank sums for the energies of each body (arrays, or exact_sum.Exact
         running totals): strain (V^0 psi of the owned integration points), plastic work
         (V^0 w_p), damage work (the work the particles have taken beyond their strain energy
-        and plastic work, V^0 (W - psi - w_p): materials.damage), viscous work (absorbed by the artificial viscosity),
-        hourglass (the particles' penalty, the work absorbed on this rank by the paper form,
-        the penalty released at reference updates), contact (each particle's half of its
-        pairs' potential: parsph.contact), contact work (absorbed by contact damping and
-        friction) and external work."""
+        and plastic work, V^0 (W - psi - w_p): materials.damage), viscous work (absorbed by
+        the artificial viscosity), hourglass (the particles' penalty, the work absorbed on
+        this rank by the paper form, the penalty released at reference updates), contact
+        (each particle's half of its pairs' potential: parsph.contact), contact work
+        (absorbed by contact damping and friction) and external work."""
         out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "contact": [],
                "contact_work": [], "external": []}
         for b in self.bodies:
