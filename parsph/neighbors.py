@@ -5,7 +5,7 @@ support is the mean of the two particles' supports, so the relation and every pa
 quantity are symmetric in i and j. Rows are sorted by global id so that every sum over a
 row runs in an order that does not depend on how particles are numbered on a rank.
 An Eulerian kernel keeps lists found with a skin beyond the supports (candidates) and picks
-the neighbours from them at each step (within_support) until a particle has moved half the
+the neighbours from them at each step (from_candidates) until a particle has moved half the
 skin.
 """
 
@@ -151,7 +151,7 @@ def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, where, i_out, j_ou
             where[p] = k
 
 
-def within_support(candidates: Pairs, positions: np.ndarray, support: np.ndarray) -> tuple:
+def from_candidates(candidates: Pairs, positions: np.ndarray, support: np.ndarray) -> tuple:
     """(the pairs of `candidates` (lists found with a skin) closer than the mean of their
     supports at `positions`, which candidates they are): what find_pairs would find now, in
     the same order, as long as no particle has moved half the skin since the candidates

@@ -31,7 +31,7 @@ class Relation:
         return np.repeat(np.arange(len(self.ptr) - 1, dtype=np.int64), np.diff(self.ptr))
 
 
-def within_support(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray, gid_cols: np.ndarray,
+def find_relation(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray, gid_cols: np.ndarray,
                    support: np.ndarray, radius: str, group_rows: np.ndarray, group_cols: np.ndarray) -> Relation:
     """The relation from the points at `x_rows` to the points at `x_cols` within the kernel
     support (`support` of the columns or of the rows, as `radius` says), between points of

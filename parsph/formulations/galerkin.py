@@ -48,7 +48,7 @@ from parsph.formulations.tlsph import gradient_row, stress_at
 from parsph.kernels.correction import MAX_CONDITION
 from parsph.kernels.functions import evaluate
 from parsph.materials import update
-from parsph.relations import within_support
+from parsph.relations import find_relation
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
 TYPES = ("kbm", "efg")
@@ -240,8 +240,8 @@ class GalerkinFormulation:
             rows = len(A["gid"])
             active = (A["body"] == body.index) if name != "particles" else mine
             key = f"{self.shape}_data"
-            trial = within_support(name, "particles", Y[: points.n_owned], X, gid, support, "cols",
-                                   np.where(active, 0, -1)[: points.n_owned], group_cols)
+            trial = find_relation(name, "particles", Y[: points.n_owned], X, gid, support, "cols",
+                                 np.where(active, 0, -1)[: points.n_owned], group_cols)
             G, data, phi = trial_gradients(self.shape, trial, Y[: points.n_owned], X, support, kernel, A["gid"],
                                            active[: points.n_owned], "particle" if name == "particles" else
                                            name[:-1].replace("_", " "))
@@ -250,8 +250,8 @@ class GalerkinFormulation:
             rows_of_body = np.flatnonzero(active[: points.n_owned])
             A[key][rows_of_body] = data[rows_of_body]
             points.refresh(key)
-            test = within_support("particles", name, X[:n], Y, A["gid"], support, "rows", group_rows[:n],
-                                  np.where(active, 0, -2))
+            test = find_relation("particles", name, X[:n], Y, A["gid"], support, "rows", group_rows[:n],
+                                np.where(active, 0, -2))
             if name == "particles":
                 base = np.arange(points.n_owned, dtype=np.int64)
             else:  # a point's first particle (rows of other bodies, never run, take any)

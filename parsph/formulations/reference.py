@@ -25,7 +25,7 @@ from parsph.errors import ParsphError
 from parsph.formulations import tlsph
 from parsph.kernels.correction import reference_pairs, reverse_index, reverse_values
 from parsph.kernels.hessian import corrected_hessians
-from parsph.neighbors import find_pairs, within_bodies, within_support
+from parsph.neighbors import find_pairs, from_candidates, within_bodies
 
 
 @dataclass
@@ -80,7 +80,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     if candidate_rev is None:
         pairs = candidates
     else:  # the neighbours among the candidates, and their reverse pairs through the candidates'
-        pairs, keep = within_support(candidates, X, support)
+        pairs, keep = from_candidates(candidates, X, support)
         renumber = np.cumsum(keep) - 1
         rev = np.where(candidate_rev[keep] >= 0, renumber[np.maximum(candidate_rev[keep], 0)], -1)
     corrected = np.array([o.corrected for o in options])
