@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from parsph.exact_sum import SCALE, Exact, totals
+from parsph.rigid import moments
 
 
 @njit(cache=True)
@@ -207,6 +208,40 @@ def contact_parts(state, reduction: RowReduction):
             for a, name in enumerate("xyz"[:dim]):
                 out[f"contact_force_{name}.{label}"] = float(reduction.sums[at + k * dim + a])
         out["contact_closest"] = -reduction.maxima[closest]
+        return out
+
+    return values
+
+
+def rigid_parts(state, reduction: RowReduction):
+    """Each rigid body's part of the row (parsph.rigid): the contact force on it from the
+    other bodies, "rigid_force_X.NAME", and for a freely moving one the torque of those
+    forces about its centre of mass, "rigid_torque.NAME" (2D) or "rigid_torque_X.NAME" (3D)."""
+    contact = state.contact
+    rigid = [b for b in state.bodies if b.rigid]
+    if contact is None or not rigid:
+        return dict
+    dim = state.dim
+    free = {body.body.index: body for body in state.rigid_bodies}
+    where = []
+    for b in rigid:
+        f = contact.force[b.lo:b.hi]
+        items = [f]
+        if b.index in free and dim > 1:
+            r = state.X[b.lo:b.hi] + state.u[b.lo:b.hi] - free[b.index].centre
+            items.append(moments(r, f))
+        where.append(reduction.add_sums(items))
+
+    def values() -> dict:
+        out = {}
+        for b, at in zip(rigid, where):
+            for a, name in enumerate("xyz"[:dim]):
+                out[f"rigid_force_{name}.{b.name}"] = float(reduction.sums[at + a])
+            if b.index in free and dim == 2:
+                out[f"rigid_torque.{b.name}"] = float(reduction.sums[at + dim])
+            elif b.index in free and dim == 3:
+                for a, name in enumerate("xyz"):
+                    out[f"rigid_torque_{name}.{b.name}"] = float(reduction.sums[at + dim + a])
         return out
 
     return values

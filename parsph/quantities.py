@@ -82,7 +82,8 @@ HISTORY = {
     "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
 HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),
-                    (r"(wall|tool)[0-9]+_force_[xyz]", "N"), (r"contact_force_[xyz]\..*", "N"))
+                    (r"(wall|tool)[0-9]+_force_[xyz]", "N"), (r"contact_force_[xyz]\..*", "N"),
+                    (r"rigid_force_[xyz]\..*", "N"), (r"rigid_torque(_[xyz])?\..*", "N m"))
 
 
 def is_history_series(name: str) -> bool:

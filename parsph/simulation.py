@@ -35,7 +35,7 @@ from parsph import config, fields, materials
 from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
 from parsph.collocation import BoundaryCollocation, collocated
 from parsph.contact import Contact
-from parsph.diagnostics import RowReduction, contact_parts, global_parts, probe_parts
+from parsph.diagnostics import RowReduction, contact_parts, global_parts, probe_parts, rigid_parts
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import galerkin, reference, tlsph
@@ -973,6 +973,7 @@ class Simulation:
         energies = global_parts(self, reduction)
         walls = reduction.add_sums(self.walls.contacts)  # obstacle-major, then component
         contact = contact_parts(self, reduction)
+        rigid = rigid_parts(self, reduction)
         probes = probe_parts(self.scene["probes"], self, reduction)
         reduction.reduce()
         out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
@@ -982,5 +983,6 @@ class Simulation:
             for a, name in enumerate("xyz"[: self.dim]):
                 out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * self.dim + a])
         out.update(contact())
+        out.update(rigid())
         out.update(probes())
         return out

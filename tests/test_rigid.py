@@ -112,6 +112,23 @@ def test_a_spinning_rigid_disk_strikes_an_elastic_block_and_stays_rigid():
     assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-3 * impact
 
 
+def test_the_history_gives_the_force_and_torque_the_rigid_body_takes():
+    """The disk striking the block, a row at every step: the force on the disk is minus the
+    disk's force on the block, and its angular momentum about its centre changes by the
+    torque in the history integrated over the steps (each step's kicks: the trapezoidal
+    rule), to round-off."""
+    sim = simulation(DISK)
+    body = sim.rigid_bodies[0]
+    spin = body.inertia0[0, 0] * body.omega[0]
+    h = run_until(sim, 1e-3)
+    assert np.abs(h["rigid_torque.disk"]).max() > 0
+    assert np.allclose(h["rigid_force_y.disk"], -h["contact_force_y.block.disk"], rtol=1e-12, atol=0)
+    torque = h["rigid_torque.disk"]
+    impulse = np.sum(np.diff(h["time"]) * 0.5 * (torque[1:] + torque[:-1]))
+    change = body.inertia0[0, 0] * body.omega[0] - spin
+    assert change == pytest.approx(impulse, rel=1e-9)
+
+
 def test_a_rigid_body_held_by_a_condition_moves_as_it_says_and_a_part_cannot_be_held():
     """A [[bc]] holding the whole disk moves it with the prescribed velocity and no spin;
     one holding part of it, or some components, is refused naming the condition."""
