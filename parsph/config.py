@@ -119,6 +119,10 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "failure_strain": Key("float", None, positive,
                               "tensile damage [G eq. 45-46]: damage grows while the largest principal log "
                               "strain exceeds this (default: no damage; solids, particle formulations)"),
+        "break_pairs": Key("bool", False, None,
+                           "with failure_strain: a failed particle (damage 1) loses its pairs, so that cracks "
+                           "open and the failed particles fly free (default: they keep them, as [G §4.6]); "
+                           "total-Lagrangian kernels, no symmetry planes"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS),
@@ -742,6 +746,8 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
             raise InputError(f"{path}.formulation must be a table")
         merged = dict(raw_formulation if isinstance(raw_formulation, dict) else {}, **body["formulation"])
         body["formulation"] = _formulation(f"{path}.formulation", merged, dim)
+        if not body["rigid"]:  # absent, as in scenes written before the key existed
+            del body["rigid"]
         out.append(body)
     if not out:
         raise InputError("bodies is empty: give at least one [[bodies]] table, or none and a [material]")
@@ -814,6 +820,14 @@ def validate(raw: dict) -> dict:
             raise InputError(f"material.failure_strain: damage is for solids computed at the particles "
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
+    for body in bodies(scene):
+        mat, form = body["material"], body["formulation"]
+        if mat["break_pairs"] and (mat["failure_strain"] is None or form["type"] == "ulsph"
+                                   or form.get("kernel") == "eulerian" or scene["symmetry"]):
+            raise InputError("material.break_pairs needs material.failure_strain, a total-Lagrangian kernel "
+                             "(not ulsph, not formulation.kernel = 'eulerian') and no [[symmetry]] planes")
+        if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
+            del mat["break_pairs"]
     if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):
         raise InputError(
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "

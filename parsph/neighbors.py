@@ -183,7 +183,44 @@ def within_bodies(pairs: Pairs, body: np.ndarray) -> Pairs:
     """`pairs` without the pairs of particles of different bodies (`body`: each local
     particle's body index): bodies interact only through contact, not through kernels."""
     rows = pairs.row_of_pair()
-    keep = body[rows] == body[pairs.idx]
+    return _kept(pairs, rows, body[rows] == body[pairs.idx])
+
+
+def without(pairs: Pairs, detached: np.ndarray, gid: np.ndarray, cut: np.ndarray) -> Pairs:
+    """`pairs` without the pairs of which an end is `detached` (a bool per local particle:
+    failed particles that have lost their pairs, materials.damage) and without the pairs
+    `cut` (pair_keys of their global ids: crossing)."""
+    rows = pairs.row_of_pair()
+    keep = ~(detached[rows] | detached[pairs.idx])
+    if len(cut):
+        keep &= ~np.isin(pair_keys(gid[rows], gid[pairs.idx]), cut)
+    return _kept(pairs, rows, keep)
+
+
+def pair_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """One int64 per pair of global ids (below 2^31), the same for (a, b) and (b, a)."""
+    return (np.minimum(a, b) << 32) | np.maximum(a, b)
+
+
+def crossing(pairs: Pairs, X: np.ndarray, gid: np.ndarray, spacing: np.ndarray, failed: np.ndarray) -> np.ndarray:
+    """The pair_keys of the pairs (a, b) of neighbours of a failed particle k (rows `failed`
+    of `pairs`, searched in the reference X) whose reference segment passes within half
+    k's spacing of X_k: the crack through k cuts them, as it cuts k's own pairs (the
+    visibility criterion of meshfree fracture). Sorted, unique."""
+    keys = [np.zeros(0, np.int64)]
+    for k in failed:
+        near = pairs.idx[pairs.ptr[k]:pairs.ptr[k + 1]]
+        a, b = np.triu_indices(len(near), 1)
+        A, B = X[near[a]], X[near[b]]
+        seg = B - A
+        t = np.clip(np.einsum("pa,pa->p", X[k] - A, seg) / np.einsum("pa,pa->p", seg, seg), 0.0, 1.0)
+        off = A + t[:, None] * seg - X[k]
+        hit = np.einsum("pa,pa->p", off, off) < (0.5 * spacing[k]) ** 2
+        keys.append(pair_keys(gid[near[a][hit]], gid[near[b][hit]]))
+    return np.unique(np.concatenate(keys))
+
+
+def _kept(pairs: Pairs, rows: np.ndarray, keep: np.ndarray) -> Pairs:
     ptr = np.zeros(pairs.rows + 1, np.int64)
     np.cumsum(np.bincount(rows[keep], minlength=pairs.rows), out=ptr[1:])
     return Pairs(ptr, pairs.idx[keep])

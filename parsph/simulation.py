@@ -41,6 +41,7 @@ from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
 from parsph.materials import damage, elastoplastic, update
+from parsph.neighbors import crossing, find_pairs
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
@@ -77,6 +78,7 @@ class Body:
         self.constants = materials.constants(spec["material"])
         self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
         self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
+        self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs
         self.density = spec["material"]["density"]
         kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
         self.formulation = kind(spec["formulation"], dim, self.law.law_id, damaged=self.failure_strain is not None)
@@ -101,6 +103,7 @@ class Simulation:
                        for b, spec in enumerate(specs)]
         forms = [b.formulation for b in self.bodies]
         self.updated = any(f.updated for f in forms)  # one body only (config)
+        self.breaking = any(b.breaks_pairs for b in self.bodies)
         self.eta = max(f.eta for f in forms)
         self.hourglass = any(f.hourglass_form for f in forms)
         self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
@@ -205,13 +208,17 @@ class Simulation:
         with collective(self.comm):
             local, mirrors = add_images(local, ref[0], self.scene["symmetry"], self.comm)
             fl, n, dim = local.fields, local.n_owned, self.dim
-            layer2 = self.search_every > 1  # kept to rebuild the ghosts' rows between searches
+            # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
+            layer2 = self.search_every > 1 or self.breaking
             self.decomp = Decomposition(local, self.comm, mirrors, layer2=layer2)
             body = np.searchsorted(self.offsets, local.gid % local.total, side="right") - 1
+            self.detached = self._failed(fl.get("damage"), body)
+            cut = self._crack(fl["X"], fl["measure"], fl["support"], local.gid, n, self.detached)
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.bodies[0].formulation.weighted_hessian, skin=self.skin)
+                self.eta, self.bodies[0].formulation.weighted_hessian, skin=self.skin, detached=self.detached,
+                cut=cut)
         if layer2:
             keep = len(local.gid)
         else:
@@ -288,6 +295,69 @@ class Simulation:
             if b.rigid:
                 self.F[b.lo:b.hi] = np.eye(dim)
 
+    def _failed(self, state: np.ndarray | None, body: np.ndarray) -> np.ndarray | None:
+        """Which local particles of bodies whose failed particles lose their pairs have
+        failed (damage 1 in the damage `state` of every local row; none without one), or
+        None if no body's do."""
+        if not self.breaking:
+            return None
+        if state is None:
+            return np.zeros(len(body), bool)
+        breaking = np.array([b.breaks_pairs for b in self.bodies])
+        return breaking[body[: len(state)]] & (state[:, damage.DAMAGE] >= 1.0)
+
+    def _crack(self, X: np.ndarray, measure: np.ndarray, support: np.ndarray, gid: np.ndarray, n: int,
+               detached) -> np.ndarray | None:
+        """The keys of the pairs the failed particles cut (neighbors.crossing), over all ranks:
+        each owned failed particle's from its neighbours in the reference X (collective)."""
+        if detached is None:
+            return None
+        failed = np.flatnonzero(detached[:n])
+        keys = np.zeros(0, np.int64)
+        if len(failed):
+            searched = find_pairs(X, support, gid, n)
+            keys = crossing(searched, X, gid, measure ** (1.0 / self.dim), failed)
+        return np.unique(np.concatenate(self.comm.allgather(keys)))
+
+    def _break_pairs(self) -> None:
+        """Particles that have failed since the last call lose their pairs (collective): the
+        reference data is built again without them (materials.damage: cracks open), and
+        again while it leaves a particle with a singular correction matrix (a particle cut
+        off from its body: it fails too). The forces are evaluated on the new pairs; the
+        change of the stress this makes does no work (the particles do not move): the damage
+        state's work W is kept, so that the strain energy it releases counts as damage
+        work, and the hourglass penalty it drops as released (the balance stays closed)."""
+        n = self.n_owned
+        state, trial = self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
+        new = self._failed(state[:n], self.body) & ~self.detached[:n]
+        if not self.comm.allreduce(bool(new.any()), op=MPI.LOR):
+            return
+        while True:
+            self.decomp.refresh_all(state)
+            detached = self._failed(state, self.body)
+            with collective(self.comm):
+                cut = self._crack(self.X, self.measure, self.support, self.gid, n, detached)
+                ref = reference.build(
+                    self.X, self.measure, self.volume, self.support, self.gid, n, self.decomp.n_rows,
+                    self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
+                    self.eta, self.bodies[0].formulation.weighted_hessian, detached=detached, cut=cut,
+                    tolerant=True)
+            if not self.comm.allreduce(len(ref.bad)):
+                break
+            state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
+        self.ref, self.detached = ref, detached
+        for b in self.bodies:
+            b.stages = [] if b.rigid else b.formulation.stages(self, b)
+        penalty = self.hg_psi.copy()
+        work = state[:, damage.WORK].copy()
+        self.compute_forces()
+        for b in self.bodies:
+            self.totals["hourglass_released"][b.index].add(penalty[b.lo:b.hi] - self.hg_psi[b.lo:b.hi])
+        trial[:, damage.WORK] = work
+        self._commit_states()
+        self._find_broken()
+        self._external = self.external_force()
+
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned
         points, then ghosts (within the kernel support of an owned particle), the fields it
@@ -331,15 +401,19 @@ class Simulation:
     def _commit(self, dt: float) -> None:
         """The state of the last stress evaluation becomes the committed state (owned
         points); damage grows over the coming step dt (materials.damage.grow)."""
-        for points in self.point_sets():
-            for name in points.carried:
-                if fields.get(name, points.name).kind == "state":
-                    points.owned(name)[:] = points.owned(name + "_trial")
+        self._commit_states()
         for b in self.bodies:
             if b.failure_strain is not None:
                 damage.grow(self.damage_state(b)[0][b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
                             self.support[b.lo:b.hi], dt)
         self._find_broken()
+
+    def _commit_states(self) -> None:
+        """The state of the last stress evaluation becomes the committed state (owned points)."""
+        for points in self.point_sets():
+            for name in points.carried:
+                if fields.get(name, points.name).kind == "state":
+                    points.owned(name)[:] = points.owned(name + "_trial")
 
     def _find_broken(self) -> None:
         """Mark the owned particles that have failed (committed damage 1)."""
@@ -593,6 +667,8 @@ class Simulation:
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
         self._commit(dt)
+        if self.breaking:
+            self._break_pairs()
         u_old = self.u[:n].copy()
         v_old = self.v[:n].copy() if self.bcs.moving or self.collocation else None
         f_hg_old = self.f_hg.copy()

@@ -149,12 +149,64 @@ def test_notched_strip_breaks_across_the_notch_and_the_energy_balance_closes():
     assert peak > 0 and abs(force) < 0.2 * peak  # no longer carries the load
 
 
+def pair_components(sim) -> np.ndarray:
+    """The connected components of the owned particles' pair graph (one rank): a label each."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n, ref = sim.n_owned, sim.ref
+    graph = csr_matrix((np.ones(len(ref.idx)), ref.idx, ref.ptr), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+@pytest.mark.parametrize("breaking", [False, True])
+def test_with_pair_breaking_the_crack_opens_and_the_strip_comes_apart(breaking):
+    """The notched strip to 25 us with material.break_pairs: its failed particles have no
+    pairs, the intact ones form two bodies, one held and one pulled, which have moved apart
+    by more than a spacing at the crack; the balance (the strain energy released by the
+    broken pairs counted as damage work) closes to 1 % of the external work. Without it the
+    strip stays one piece, glued by its failed particles."""
+    text = STRIP.replace("end = 1.3e-5", "end = 2.5e-5")
+    if breaking:
+        text = text.replace("failure_strain = 0.03", "failure_strain = 0.03\nbreak_pairs = true")
+    sim = simulation(text)
+    worst = 0.0
+    while sim.t < 2.5e-5:
+        sim.step(2.5e-5)
+        d = global_diagnostics(sim)
+        worst = max(worst, abs(d["total_energy"]) / d["external_work"]) if sim.step_count > 20 else 0.0
+    n = sim.n_owned
+    failed = sim.quantity("damage", np.arange(n)) == 1.0
+    label = pair_components(sim)
+    intact = np.unique(label[~failed])
+    held, pulled = label[sim.group_index("held")], label[sim.group_index("pulled")]
+    if not breaking:
+        assert len(intact) == 1
+        return
+    assert failed.sum() > 10 and not np.isin(np.flatnonzero(failed), sim.ref.idx).any()
+    assert np.all(np.diff(sim.ref.ptr)[failed] == 0)
+    assert len(intact) == 2 and len(np.unique(held)) == len(np.unique(pulled)) == 1 and held[0] != pulled[0]
+    x = sim.X[:n] + sim.u[:n]
+    a, b = x[label == held[0]], x[label == pulled[0]]
+    gap = np.sqrt(((a[:, None] - b[None]) ** 2).sum(axis=2)).min()
+    assert gap > 1.5 * 0.5e-3  # the spacing s
+    assert worst < 0.01
+
+
 @pytest.mark.mpi
 def test_damage_is_the_same_on_three_ranks_and_across_a_restart(tmp_path):
     """One rank straight through against two ranks to the history row at about 3/4 of the
-    run (the crack growing) and three after the restart: the same bit for bit."""
+    run (the crack growing) and three after the restart: the same bit for bit; with the
+    failed particles' pairs broken too."""
     path = tmp_path / "strip.toml"
     path.write_text(STRIP)
+    broken = tmp_path / "broken.toml"
+    broken.write_text(STRIP.replace("failure_strain = 0.03", "failure_strain = 0.03\nbreak_pairs = true"))
+    for scene in (path, broken):
+        same_across_ranks_and_restart(scene, tmp_path / scene.stem)
+
+
+def same_across_ranks_and_restart(path, tmp_path):
     one, split = tmp_path / "one", tmp_path / "split"
     proc = parsph(["run", path, "--out", one, "--quiet"])
     assert proc.returncode == 0, proc.stderr

@@ -25,7 +25,7 @@ from parsph.errors import ParsphError
 from parsph.formulations import tlsph
 from parsph.kernels.correction import reference_pairs, reverse_index, reverse_values
 from parsph.kernels.hessian import corrected_hessians
-from parsph.neighbors import find_pairs, from_candidates, within_bodies
+from parsph.neighbors import find_pairs, from_candidates, within_bodies, without
 
 
 @dataclass
@@ -50,6 +50,7 @@ class ReferenceData:
     stiffening: np.ndarray  # how much the stabilisation stiffens each owned particle (>= 1)
     candidates: object  # neighbour lists with a skin (neighbors.Pairs, rows 0..n_rows-1), kept between searches
     candidate_rev: np.ndarray | None  # their reverse_index
+    bad: np.ndarray  # owned rows whose correction matrix is singular (with `tolerant`)
 
 
 @dataclass(frozen=True)
@@ -64,18 +65,25 @@ class PairOptions:
 
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str, body: np.ndarray,
           options: list, eta: float, weighted_hessian: bool, skin: float = 0.0, candidates=None,
-          candidate_rev=None) -> ReferenceData:
+          candidate_rev=None, detached: np.ndarray | None = None, cut: np.ndarray | None = None,
+          tolerant: bool = False) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
     and layer-1 ghosts) are built to provide the reverse coefficients g_ji. `body` is each
     local particle's body index and options[b] its body's PairOptions; particles of
-    different bodies are not neighbours. The neighbours are searched for (with lists `skin`
-    beyond the support, kept as `candidates` with their reverse index `candidate_rev`), or
-    picked from the candidates of an earlier search: the same pairs in the same order."""
+    different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
+    failed particles whose pairs are broken, materials.damage) of any, nor the pairs `cut`
+    (neighbors.crossing: across a crack). The neighbours are
+    searched for (with lists `skin` beyond the support, kept as `candidates` with their
+    reverse index `candidate_rev`), or picked from the candidates of an earlier search: the
+    same pairs in the same order. `tolerant`: owned rows left with a singular correction
+    matrix are listed in `bad` rather than raised."""
     rev = None
     if candidates is None:
         candidates = find_pairs(X, support, gid, n_rows, skin)
         if len(options) > 1:
             candidates = within_bodies(candidates, body)
+        if detached is not None and detached.any():
+            candidates = without(candidates, detached, gid, np.zeros(0, np.int64) if cut is None else cut)
         candidate_rev = reverse_index(candidates) if skin > 0 else None
     if candidate_rev is None:
         pairs = candidates
@@ -85,7 +93,8 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         rev = np.where(candidate_rev[keep] >= 0, renumber[np.maximum(candidate_rev[keep], 0)], -1)
     corrected = np.array([o.corrected for o in options])
     ref = reference_pairs(X, measure, support, gid, pairs, kernel,
-                          None if corrected.all() else corrected[body[:n_rows]], rev)
+                          None if corrected.all() else corrected[body[:n_rows]], rev,
+                          None if detached is None else detached[:n_rows], tolerant)
     n = n_owned
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
@@ -133,4 +142,4 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
         g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, hreg=hreg, q=q, q_rev=q_rev, q_sum=q_sum,
         gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, candidates=candidates,
-        candidate_rev=candidate_rev)
+        candidate_rev=candidate_rev, bad=ref.bad[ref.bad < n])

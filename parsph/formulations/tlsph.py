@@ -383,7 +383,7 @@ def symmetric_extremes(C, dim):
     q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
     off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
     p = math.sqrt(((C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
-    if p < 1e-14 * q:  # (nearly) isotropic: also keeps p**3 from underflowing to zero
+    if p <= 1e-14 * q:  # (nearly) isotropic or zero: also keeps p**3 from underflowing to zero
         return q, q
     for a in range(3):
         C[a, a] -= q

@@ -40,6 +40,7 @@ class ReferencePairs:
     g_sum: np.ndarray  # (rows, d) sum_j g_ij
     condition: np.ndarray  # (rows,) condition number of L_i
     rev: np.ndarray  # (npairs,) index of the pair (j, i), -1 if j has no row
+    bad: np.ndarray  # rows whose L_i is singular or ill-conditioned (`tolerant`: not raised)
 
 
 @njit(cache=True)
@@ -104,11 +105,14 @@ def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
     pairs: Pairs, kernel: str, corrected: np.ndarray | None = None, rev: np.ndarray | None = None,
+    detached: np.ndarray | None = None, tolerant: bool = False,
 ) -> ReferencePairs:
     """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
     with `corrected` False get the plain SPH gradient g_ij = -V_j w_ij = V_j grad_i W_ij
-    (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i. `rev`: the
-    pairs' reverse_index, if known."""
+    (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i; so do the rows
+    of `detached` particles (no pairs). `rev`: the pairs' reverse_index, if known.
+    `tolerant`: singular or ill-conditioned rows are listed in `bad` (with L_i^-1 = -I)
+    instead of raising."""
     dim = positions.shape[1]
     rows = pairs.rows
     row = pairs.row_of_pair()
@@ -129,13 +133,17 @@ def reference_pairs(
     counts = pairs.counts()
     condition = np.full(rows, np.inf)
     ok = counts > 0
-    if corrected is not None:
-        ok &= corrected
-        condition[~corrected] = 1.0
+    plain = np.zeros(rows, bool) if corrected is None else ~corrected
+    if detached is not None:
+        plain |= detached[:rows]
+    ok &= ~plain
+    condition[plain] = 1.0
     if ok.any():
         condition[ok] = np.linalg.cond(L[ok])
     bad = ~(condition < MAX_CONDITION)
-    if bad.any():
+    if tolerant:
+        plain |= bad
+    elif bad.any():
         first = int(np.flatnonzero(bad)[0])
         where = ", ".join(f"{c:.6g}" for c in positions[first])
         raise InputError(
@@ -144,8 +152,7 @@ def reference_pairs(
             f"{int(bad.sum())} particle(s) affected. Increase kernel.support or kernel.neighbours, "
             "or check for isolated or collinear particles."
         )
-    if corrected is not None:
-        L[~corrected] = -np.eye(dim)
+    L[plain] = -np.eye(dim)
     Linv = np.linalg.inv(L) if rows else L
     g = np.empty_like(dx)
     g_sum = np.empty((rows, dim))
@@ -153,4 +160,4 @@ def reference_pairs(
     rev = reverse_index(pairs) if rev is None else rev
     g_rev = reverse_values(g, rev)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
-                          rev=rev)
+                          rev=rev, bad=np.flatnonzero(bad))
