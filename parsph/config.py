@@ -309,6 +309,8 @@ CONTACT_KEYS = {
     "restitution": Key("float", 1.0, in_range(0.0, 1.0),
                        "coefficient of restitution of a pair's normal impact (a dashpot; 1: none)"),
     "friction": Key("float", 0.0, non_negative, "Coulomb friction coefficient between the two bodies"),
+    "self_contact": Key("bool", False, None, "bodies names one body twice: its particles that are not kernel "
+                                             "neighbours touch (crack faces, folds)"),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
@@ -860,9 +862,10 @@ def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
             if name not in names:
                 raise InputError(f"{path}.bodies names body '{name}', which is not defined"
                                  f"{_suggest(name, names) if names else ' (contact needs [[bodies]])'}")
-        if pair[0] == pair[1]:
-            raise InputError(f"{path}.bodies: contact of body '{pair[0]}' with itself (self-contact) is not "
-                             "supported: name two different bodies")
+        if (pair[0] == pair[1]) != item["self_contact"]:
+            raise InputError(f"{path}.bodies: contact of body '{pair[0]}' with itself needs {path}.self_contact = "
+                             "true" if pair[0] == pair[1] else
+                             f"{path}.self_contact = true needs bodies to name one body twice, got {pair!r}")
         if frozenset(pair) in seen:
             raise InputError(f"{path}.bodies: bodies '{pair[0]}' and '{pair[1]}' are paired twice")
         seen.add(frozenset(pair))

@@ -32,6 +32,11 @@ m* = m_i m_j / (m_i + m_j):
 Their work, accumulated over each step (trapezoidal rule), is the contact work, part of
 the balance; the dashpot shortens the stable step by (sqrt(1 + zeta^2) - zeta).
 
+Self-contact (an entry naming one body twice, `self_contact = true`): particles of the body
+that are not kernel neighbours of each other in its reference (the pairs the formulation
+sums over) touch as particles of two bodies do: the faces of a crack whose pairs have broken
+(materials.damage, `break_pairs`), or parts of a body folded onto each other.
+
 The pairs are found in the current configuration with a skin s of half the largest contact
 distance: candidate lists (the pairs within their contact distance plus 2 s; rows: owned
 particles, columns in global-id order, so that every sum runs in the same order on any
@@ -49,7 +54,7 @@ import numpy as np
 from mpi4py import MPI
 from numba import njit
 
-from parsph.neighbors import close_pairs
+from parsph.neighbors import close_pairs, pair_keys
 
 SKIN = 0.5  # of the largest contact distance
 
@@ -116,6 +121,8 @@ class Contact:
         self.entry_force = np.zeros((len(self.entries), n, dim))  # each entry's force from the other body
         self.closest = np.ones(n)  # |x_ij| / (r_i + r_j) of the closest candidate
         self._built_at = None  # owned contact particles' positions when the lists were made
+        self.selfish = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
+        self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
 
     def evaluate(self, x: np.ndarray, v: np.ndarray) -> None:
         """The contact forces, energies and spring bounds at the owned particles' current
@@ -133,6 +140,12 @@ class Contact:
                    self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt, self.dim,
                    self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2, self.entry_force,
                    self.closest)
+
+    def exclude(self, keys: np.ndarray) -> None:
+        """The kernel's pairs (their pair_keys, sorted) that self-contact leaves out, after the
+        reference's pairs changed: the lists are searched again at the next evaluation."""
+        self.kernel_pairs = keys
+        self._built_at = None
 
     def _moved(self, x: np.ndarray) -> float:
         """The largest displacement of a contact particle of any rank since the lists were made."""
@@ -182,6 +195,10 @@ class Contact:
         keep = (dist < self.radius_all[i] + self.radius_all[j] + 2.0 * self.skin) & \
             (self.entry_of[self.body_all[i], self.body_all[j]] >= 0)
         i, j = i[keep], j[keep]
+        if self.selfish:  # a body touches itself only where the kernel does not join it
+            kernel = np.isin(pair_keys(self.gid_all[i], self.gid_all[j]), self.kernel_pairs)
+            keep = ~(kernel & (self.body_all[i] == self.body_all[j]))
+            i, j = i[keep], j[keep]
         i, j = np.concatenate([i, j]), np.concatenate([j, i])
         rows = i < n
         i, j = i[rows], j[rows]

@@ -41,7 +41,7 @@ from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
 from parsph.materials import damage, elastoplastic, update
-from parsph.neighbors import crossing, find_pairs
+from parsph.neighbors import crossing, find_pairs, pair_keys
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
@@ -290,6 +290,7 @@ class Simulation:
         self.contact = Contact(self.scene["contact"], self.bodies, self.body, self.measure, self.mass, self.gid, n, dim,
                                config.thickness(self.scene), self.comm) if self.scene.get("contact") else None
         self.omega_c2 = self.contact.omega2 if self.contact else np.zeros(0)
+        self._exclude_kernel_pairs()
         for b in self.bodies:
             b.stages = [] if b.rigid else b.formulation.stages(self, b)
             if b.rigid:
@@ -346,6 +347,7 @@ class Simulation:
                 break
             state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
         self.ref, self.detached = ref, detached
+        self._exclude_kernel_pairs()
         for b in self.bodies:
             b.stages = [] if b.rigid else b.formulation.stages(self, b)
         penalty = self.hg_psi.copy()
@@ -357,6 +359,12 @@ class Simulation:
         self._commit_states()
         self._find_broken()
         self._external = self.external_force()
+
+    def _exclude_kernel_pairs(self) -> None:
+        """Tell a self-contact the kernel's pairs (of the owned rows), which it leaves out."""
+        if self.contact and self.contact.selfish:
+            rows = np.repeat(np.arange(self.n_owned), np.diff(self.ref.ptr))
+            self.contact.exclude(np.unique(pair_keys(self.gid[rows], self.gid[self.ref.idx])))
 
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned

@@ -165,6 +165,36 @@ def test_colliding_rings_with_damping_and_friction_keep_the_balance():
     assert h["gap"][-1] < -0.005
 
 
+def bars_with_a_gap(one_body: bool) -> str:
+    """runs/bars_impact.toml with the bars 0.6 mm apart (beyond the kernel's reach) and at
+    +-10 m/s, as two bodies in contact or as one body of two parts in self-contact."""
+    text = (RUNS / "bars_impact.toml").read_text()
+    text = text.replace('lower = ["= L"]\nupper = ["= 2 * L"]', 'lower = ["= L + gap"]\nupper = ["= 2 * L + gap"]')
+    text = text.replace("speed = 1.0\n", "speed = 10.0\ngap = 0.6e-3\n")
+    if one_body:
+        start, end = text.index('[[bodies]]\nname = "left"'), text.index('[bodies.material]')
+        second = text.index('[[bodies.parts]]', text.index('name = "right"'))
+        text = (text[:start] + '[[bodies]]\nname = "bars"\n' + text[start:end].split("\n", 2)[2]
+                + text[second:])
+        text = text.replace('bodies = ["left", "right"]', 'bodies = ["bars", "bars"]\nself_contact = true')
+    return text
+
+
+def test_self_contact_of_one_body_is_contact_of_two_where_the_kernel_does_not_join_them():
+    """The bars as one body of two parts in self-contact move as the two bodies in contact,
+    bit for bit: their particles within the contact distance that are kernel neighbours
+    (the bars' own lattices, compressed) do not touch; those across the gap do."""
+    runs = []
+    for one_body in (False, True):
+        sim = simulation(bars_with_a_gap(one_body))
+        assert len(sim.bodies) == (1 if one_body else 2)
+        h = run_until(sim, 1.4e-4, every=50)
+        runs.append((sim.X + sim.u, sim.v.copy(), h))
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+    h = runs[1][2]
+    assert h["contact_energy"].max() > 0 and h["left_velocity"][-1] == pytest.approx(-10.0, rel=0.05)
+
+
 @pytest.mark.parametrize("alpha", [50.0, 0.0])
 def test_block_pressed_between_rigid_particle_plates_stays_ordered_only_with_hourglass_control(alpha):
     """runs/punch_hertz.toml at 10 particles over the block's height ([G §4.3, Fig. 7]): the
@@ -237,7 +267,9 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
 
 
 @pytest.mark.parametrize("contact, message", [
-    ('bodies = ["left", "left"]', "contact[0].bodies: contact of body 'left' with itself (self-contact)"),
+    ('bodies = ["left", "left"]', "contact[0].bodies: contact of body 'left' with itself needs "
+                                  "contact[0].self_contact = true"),
+    ('bodies = ["left", "right"]\nself_contact = true', "contact[0].self_contact = true needs bodies to name one"),
     ('bodies = ["left", "rigth"]', "contact[0].bodies names body 'rigth', which is not defined"),
     ('bodies = ["left"]', "contact[0].bodies must name two bodies"),
     ('bodies = ["left", "right"]\nradius = 0.0', "contact[0].radius must be > 0"),

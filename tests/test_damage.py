@@ -193,6 +193,41 @@ def test_with_pair_breaking_the_crack_opens_and_the_strip_comes_apart(breaking):
     assert worst < 0.01
 
 
+@pytest.mark.parametrize("self_contact", [False, True])
+def test_with_self_contact_the_faces_of_a_crack_push_apart_instead_of_passing_through(self_contact):
+    """The notched strip as a body with break_pairs, broken in two (20 us), then its pulled
+    end driven back at 50 m/s for 30 us: with self-contact the crack's faces meet and hold
+    (no two particles of the two pieces closer than 0.6 of a spacing); without it the pieces
+    pass into each other."""
+    text = STRIP.replace("[[geometry.parts]]", "[[bodies.parts]]", 1).replace(
+        "[[bodies.parts]]", '[[bodies]]\nname = "strip"\n[[bodies.parts]]', 1).replace(
+        "[[geometry.parts]]", "[[bodies.parts]]").replace("[material]", "[bodies.material]").replace(
+        "failure_strain = 0.03", "failure_strain = 0.03\nbreak_pairs = true").replace("end = 1.3e-5", "end = 5.0e-5")
+    if self_contact:
+        text += '[[contact]]\nbodies = ["strip", "strip"]\nself_contact = true\n'
+    sim = simulation(text)
+    while sim.t < 2.0e-5:
+        sim.step(2.0e-5)
+    label = pair_components(sim)
+    n = sim.n_owned
+    held, pulled = label[sim.group_index("held")][0], label[sim.group_index("pulled")][0]
+    assert held != pulled  # broken in two
+    for c in sim.bcs.items:
+        if c.kind == "velocity":
+            c.value = -c.value
+    closest = np.inf
+    while sim.t < 5.0e-5:
+        sim.step(5.0e-5)
+        x = sim.X[:n] + sim.u[:n]
+        a, b = x[label == held], x[label == pulled]
+        closest = min(closest, np.sqrt(((a[:, None] - b[None]) ** 2).sum(axis=2)).min())
+    if self_contact:
+        assert closest > 0.6 * 0.5e-3
+        assert global_diagnostics(sim)["contact_energy"] >= 0.0
+    else:
+        assert closest < 0.3 * 0.5e-3
+
+
 @pytest.mark.mpi
 def test_damage_is_the_same_on_three_ranks_and_across_a_restart(tmp_path):
     """One rank straight through against two ranks to the history row at about 3/4 of the
