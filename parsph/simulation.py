@@ -325,9 +325,11 @@ class Simulation:
         reference data is built again without them (materials.damage: cracks open), and
         again while it leaves a particle with a singular correction matrix (a particle cut
         off from its body: it fails too). The forces are evaluated on the new pairs; the
-        change of the stress this makes does no work (the particles do not move): the damage
-        state's work W is kept, so that the strain energy it releases counts as damage
-        work, and the hourglass penalty it drops as released (the balance stays closed)."""
+        change of F this makes does no work (the particles do not move): an elasto-plastic
+        particle keeps its elastic state (its plastic metric takes the change), an elastic
+        one's stress changes, and the damage state's work W is kept, so that the strain
+        energy it releases counts as damage work, and the hourglass penalty it drops as
+        released (the balance stays closed)."""
         n = self.n_owned
         state, trial = self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
         new = self._failed(state[:n], self.body) & ~self.detached[:n]
@@ -352,7 +354,14 @@ class Simulation:
             b.stages = [] if b.rigid else b.formulation.stages(self, b)
         penalty = self.hg_psi.copy()
         work = state[:, damage.WORK].copy()
+        F_old = self.F[:n].copy()
         self.compute_forces()
+        plastic = [b for b in self.bodies if b.law.state == "plastic_state" and not b.rigid]
+        for b in plastic:  # their elastic state (stress) is kept: the plastic metric takes the change of F
+            elastoplastic.keep_elastic_state(self.material_state(b)[0][b.lo:b.hi], F_old[b.lo:b.hi],
+                                             self.F[b.lo:b.hi])
+        if plastic:
+            self.compute_forces()
         for b in self.bodies:
             self.totals["hourglass_released"][b.index].add(penalty[b.lo:b.hi] - self.hg_psi[b.lo:b.hi])
         trial[:, damage.WORK] = work

@@ -252,3 +252,34 @@ def test_scene_keys_of_plasticity_and_damage_are_checked():
         scene_from("taylor_impact", ["material.model='neo_hookean'"])
     with pytest.raises(InputError, match="material.failure_strain: damage is for solids computed at the particles"):
         scene_from("rubber_ring", ["material.failure_strain=0.1"])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_jump_of_F_without_motion_keeps_the_elastic_state(dim):
+    """elastoplastic.keep_elastic_state (a particle's pairs broke, its F jumped): the plastic
+    metric takes the change, so b^e = F (C^p)^-1 F^T, and with it the stress, is unchanged."""
+    from parsph.materials.elastoplastic import SYMMETRIC_PAIRS, keep_elastic_state
+
+    rng = np.random.default_rng(dim)
+    n = 5
+    F_old = np.eye(dim) + 0.2 * rng.standard_normal((n, dim, dim))
+    F_new = F_old + 0.1 * rng.standard_normal((n, dim, dim))
+    G = np.eye(3) + 0.1 * rng.standard_normal((n, 3, 3))
+    metric = np.einsum("nab,ncb->nac", G, G)  # symmetric positive definite (C^p)^-1
+    state = np.zeros((n, 8))
+    for k, (a, b) in enumerate(SYMMETRIC_PAIRS):
+        state[:, k] = metric[:, a, b]
+    state[:, 6:] = [0.3, 1e6]  # plastic strain and work: untouched
+
+    def elastic(F):
+        full = np.tile(np.eye(3), (n, 1, 1))
+        full[:, :dim, :dim] = F
+        M = np.empty((n, 3, 3))
+        for k, (a, b) in enumerate(SYMMETRIC_PAIRS):
+            M[:, a, b] = M[:, b, a] = state[:, k]
+        return np.einsum("nab,nbc,ndc->nad", full, M, full)
+
+    before = elastic(F_old)
+    keep_elastic_state(state, F_old, F_new)
+    assert np.allclose(elastic(F_new), before, rtol=1e-12, atol=1e-12)
+    assert np.all(state[:, 6:] == [0.3, 1e6])

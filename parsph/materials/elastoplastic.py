@@ -183,3 +183,20 @@ def hourglass_modulus(c: np.ndarray, state: np.ndarray, youngs: float) -> np.nda
     hourglass force, one that has not keeps E (from the committed state of each row)."""
     eps_bar = state[:, PLASTIC_STRAIN]
     return np.where(eps_bar > 0.0, np.maximum(c[3] + c[4] * eps_bar, 0.0), youngs)
+
+
+def keep_elastic_state(state: np.ndarray, F_old: np.ndarray, F_new: np.ndarray) -> None:
+    """When F jumps from F_old to F_new (dim x dim, rows of `state`) without the particle
+    moving (its pairs changed: materials.damage, break_pairs), carry the plastic metric so
+    that the elastic state b^e = F (C^p)^-1 F^T, and with it the stress, stays as it was:
+    (C^p)^-1 <- A (C^p)^-1 A^T with A = F_new^-1 F_old (in place)."""
+    n, dim = F_old.shape[0], F_old.shape[1]
+    old, new = np.tile(np.eye(3), (n, 1, 1)), np.tile(np.eye(3), (n, 1, 1))
+    old[:, :dim, :dim], new[:, :dim, :dim] = F_old, F_new
+    A = np.linalg.solve(new, old)
+    M = np.empty((n, 3, 3))
+    for k, (a, b) in enumerate(SYMMETRIC_PAIRS):
+        M[:, a, b] = M[:, b, a] = state[:, k]
+    M = np.einsum("nab,nbc,ndc->nad", A, M, A)
+    for k, (a, b) in enumerate(SYMMETRIC_PAIRS):
+        state[:, k] = M[:, a, b]
