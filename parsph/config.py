@@ -753,10 +753,14 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
         out.append(body)
     if not out:
         raise InputError("bodies is empty: give at least one [[bodies]] table, or none and a [material]")
-    if len(out) > 1 and any(b["formulation"]["type"] == "ulsph" or b["formulation"]["hessian"] > 0
-                            or b["formulation"].get("kernel") == "eulerian" for b in out):
-        raise InputError("formulation.type = 'ulsph', formulation.hessian and formulation.kernel = 'eulerian' "
-                         "need a scene of one body")
+    if len(out) > 1 and any(b["formulation"]["type"] == "ulsph" or b["formulation"].get("kernel") == "eulerian"
+                            for b in out):
+        raise InputError("formulation.type = 'ulsph' and formulation.kernel = 'eulerian' need a scene of one body")
+    stabilised = {(b["formulation"]["hessian"], b["formulation"]["hessian_correction"]) for b in out
+                  if b["formulation"]["hessian"] > 0}
+    if len(stabilised) > 1:
+        raise InputError("formulation.hessian: the bodies with Hessian stabilisation must share its value and "
+                         f"hessian_correction, got {sorted(stabilised)}")
     return out
 
 

@@ -104,7 +104,8 @@ class Simulation:
         forms = [b.formulation for b in self.bodies]
         self.updated = any(f.updated for f in forms)  # one body only (config)
         self.breaking = any(b.breaks_pairs for b in self.bodies)
-        self.eta = max(f.eta for f in forms)
+        self.eta = max(f.eta for f in forms)  # the bodies with Hessian stabilisation share it (config)
+        self.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
         self.hourglass = any(f.hourglass_form for f in forms)
         self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
         # an Eulerian kernel's neighbour lists and ghost layers: searched at most every
@@ -217,7 +218,7 @@ class Simulation:
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.bodies[0].formulation.weighted_hessian, skin=self.skin, detached=self.detached,
+                self.eta, self.weighted_hessian, skin=self.skin, detached=self.detached,
                 cut=cut)
         if layer2:
             keep = len(local.gid)
@@ -343,7 +344,7 @@ class Simulation:
                 ref = reference.build(
                     self.X, self.measure, self.volume, self.support, self.gid, n, self.decomp.n_rows,
                     self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
-                    self.eta, self.bodies[0].formulation.weighted_hessian, detached=detached, cut=cut,
+                    self.eta, self.weighted_hessian, detached=detached, cut=cut,
                     tolerant=True)
             if not self.comm.allreduce(len(ref.bad)):
                 break
@@ -838,7 +839,7 @@ class Simulation:
             self.ref = reference.build(
                 self.Xr, self.measure_r, self.volume_r, self.support, self.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.bodies[0].formulation.weighted_hessian, candidates=self.ref.candidates,
+                self.eta, self.weighted_hessian, candidates=self.ref.candidates,
                 candidate_rev=self.ref.candidate_rev)
             for b in self.bodies:
                 if b.formulation.type in galerkin.TYPES:

@@ -30,11 +30,15 @@ def _sim(raw, steps=0):
     return sim
 
 
-def test_a_body_moves_as_it_would_alone():
+@pytest.mark.parametrize("hessian", [0.0, 0.3])
+def test_a_body_moves_as_it_would_alone(hessian):
     """The steel block of two_blocks follows, bit for bit, the run of the steel block alone
-    (its step limits both runs' time step): the other body does not touch it."""
-    both = _sim(_raw(), steps=60)
-    alone_raw = _raw()
+    (its step limits both runs' time step): the other body does not touch it; also with
+    Hessian stabilisation [V eq. 17] on the steel block only."""
+    raw = _raw()
+    raw["bodies"][0]["formulation"] = {"hessian": hessian}
+    both = _sim(copy.deepcopy(raw), steps=60)
+    alone_raw = copy.deepcopy(raw)
     del alone_raw["bodies"][1], alone_raw["initial"][1], alone_raw["groups"]["right_block"]
     alone = _sim(alone_raw, steps=60)
     steel = both.bodies[0]
@@ -77,7 +81,10 @@ def test_each_body_has_its_material_and_formulation():
     (lambda raw: raw.update(material={"model": "neo_hookean", "density": 1.0}), "remove the top-level [material]"),
     (lambda raw: raw["bodies"][1].update(name="steel"), "bodies[1].name must be a distinct identifier"),
     (lambda raw: raw["bodies"][1]["formulation"].update(type="ulsph", update_every=5),
-     "'ulsph', formulation.hessian and formulation.kernel = 'eulerian' need a scene of one body"),
+     "'ulsph' and formulation.kernel = 'eulerian' need a scene of one body"),
+    (lambda raw: [raw["bodies"][0].update(formulation={"hessian": 0.3}),
+                  raw["bodies"][1]["formulation"].update(type="tlsph", hessian=0.5)],
+     "the bodies with Hessian stabilisation must share its value"),
     (lambda raw: raw["bodies"][0]["material"].pop("density"), "missing required key 'bodies[0].material.density'"),
     (lambda raw: raw["bodies"][1]["material"].update(shear_modulus=1.0),
      "bodies[1].material.shear_modulus does not apply"),

@@ -65,7 +65,8 @@ class NodalFormulation:
 
     @property
     def pair_options(self) -> PairOptions:
-        return PairOptions(corrected=self.type != "sph", hourglass_form=self.hourglass_form, alpha=self.alpha)
+        return PairOptions(corrected=self.type != "sph", hourglass_form=self.hourglass_form, alpha=self.alpha,
+                           stabilised=self.eta > 0)
 
     def quadrature(self, sim, body) -> list:
         """[(X, F, w)] of the body's owned integration points: its particles, their volumes."""

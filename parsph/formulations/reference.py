@@ -56,11 +56,12 @@ class ReferenceData:
 @dataclass(frozen=True)
 class PairOptions:
     """What one body's reference data needs: corrected gradients (False: plain SPH), the
-    hourglass form (tlsph.HOURGLASS_*) and coefficient alpha."""
+    hourglass form (tlsph.HOURGLASS_*) and coefficient alpha, Hessian stabilisation."""
 
     corrected: bool
     hourglass_form: int
     alpha: float
+    stabilised: bool = False
 
 
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str, body: np.ndarray,
@@ -137,6 +138,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         size_gh = np.bincount(rows, np.abs(gh), n)
         has_g = size_g > 0
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]
+        stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
         ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), w=np.ascontiguousarray(ref.w[:end]),
         g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
