@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -98,6 +99,38 @@ def wait_for(condition, poll: float = 0.1) -> None:
         if time.monotonic() > deadline:
             pytest.fail(f"waited {CEILING} s for {condition.__doc__ or condition}")
         time.sleep(poll)
+
+
+def kill_processes_mentioning(marker: str) -> list:
+    """SIGKILL every process whose command line contains `marker`; wait until they are gone.
+    (MPICH's launcher puts each rank in a session of its own, so a process group kill misses
+    them.)"""
+    victims = []
+    # newest first: the ranks die before the launcher could end them in an orderly way
+    for entry in sorted((e for e in os.listdir("/proc") if e.isdigit()), key=int, reverse=True):
+        if int(entry) != os.getpid():
+            try:
+                with open(f"/proc/{entry}/cmdline", "rb") as fh:
+                    if marker.encode() in fh.read():
+                        os.kill(int(entry), signal.SIGKILL)
+                        victims.append(int(entry))
+            except (FileNotFoundError, ProcessLookupError, PermissionError):
+                continue
+    for pid in victims:  # until every thread has exited: only then are its files closed
+        while any(state != "Z" for state in _thread_states(pid)):
+            time.sleep(0.05)
+    return victims
+
+
+def _thread_states(pid: int) -> list:
+    states = []
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/stat") as fh:
+                states.append(fh.read().rsplit(")", 1)[1].split()[0])
+    except (FileNotFoundError, ProcessLookupError):
+        pass
+    return states
 
 
 def parsph(args, ranks: int = 1, timeout: float = CEILING, cwd=None, env=None) -> subprocess.CompletedProcess:

@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import CEILING, ROOT, RUNS, mpiexec, parsph, wait_for
+from conftest import CEILING, ROOT, RUNS, kill_processes_mentioning, mpiexec, parsph, wait_for
 
 FIELDS = '["position","velocity","J"]'
 PATCH = ["--set", f"output.snapshot_fields={FIELDS}", "--set", "output.history_every=10",
@@ -28,38 +28,6 @@ def final(out, names=("position", "velocity", "J")):
 def history(out):
     with h5py.File(out / "history.h5", "r") as f:
         return {k: f[k][()] for k in f}
-
-
-def kill_processes_mentioning(marker: str) -> list:
-    """SIGKILL every process whose command line contains `marker`; wait until they are gone.
-    (MPICH's launcher puts each rank in a session of its own, so a process group kill misses
-    them.)"""
-    victims = []
-    # newest first: the ranks die before the launcher could end them in an orderly way
-    for entry in sorted((e for e in os.listdir("/proc") if e.isdigit()), key=int, reverse=True):
-        if int(entry) != os.getpid():
-            try:
-                with open(f"/proc/{entry}/cmdline", "rb") as fh:
-                    if marker.encode() in fh.read():
-                        os.kill(int(entry), signal.SIGKILL)
-                        victims.append(int(entry))
-            except (FileNotFoundError, ProcessLookupError, PermissionError):
-                continue
-    for pid in victims:  # until every thread has exited: only then are its files closed
-        while any(state != "Z" for state in _thread_states(pid)):
-            time.sleep(0.05)
-    return victims
-
-
-def _thread_states(pid: int) -> list:
-    states = []
-    try:
-        for tid in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{tid}/stat") as fh:
-                states.append(fh.read().rsplit(")", 1)[1].split()[0])
-    except (FileNotFoundError, ProcessLookupError):
-        pass
-    return states
 
 
 def run(out, ranks, *extra, scene="patch_random", env=None):

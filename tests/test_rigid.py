@@ -4,13 +4,17 @@ body held by [[bc]], and bodies held in part refused."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pytest
 
 from parsph.errors import InputError
 from physics import run_until, simulation
 
-from conftest import assert_identical_outputs, parsph
+from conftest import CEILING, assert_identical_outputs, kill_processes_mentioning, mpiexec, parsph, wait_for
 
 DISK = """
 [scene]
@@ -131,7 +135,8 @@ def test_the_history_gives_the_force_and_torque_the_rigid_body_takes():
 
 def test_a_rigid_body_held_by_a_condition_moves_as_it_says_and_a_part_cannot_be_held():
     """A [[bc]] holding the whole disk moves it with the prescribed velocity and no spin;
-    one holding part of it, or some components, is refused naming the condition."""
+    one holding part of it, or some components, is refused naming the condition, and a
+    rigid body without particles naming its part."""
     held = DISK + '[[bc]]\ntype = "velocity"\ngroup = "disk"\nvalue = [0.0, -2.0]\n'
     sim = simulation(held)
     rows = disk_particles(sim)
@@ -146,6 +151,10 @@ def test_a_rigid_body_held_by_a_condition_moves_as_it_says_and_a_part_cannot_be_
     some = DISK + '[[bc]]\ntype = "fixed"\ngroup = "disk"\ncomponents = [1]\n'
     with pytest.raises(InputError, match=r"bc\[0\] holds part of rigid body 'disk'"):
         simulation(some)
+    empty = DISK.replace('shape = "disk"\ncenter = [0.01, 0.0161]\nradius = 0.005',
+                         'shape = "box"\nlower = [0.01, 0.016]\nupper = [0.0101, 0.0161]')
+    with pytest.raises(InputError, match=r"bodies\[1\]\.parts\[0\]: box: .* no particle fits"):
+        simulation(empty)
 
 
 @pytest.mark.mpi
@@ -170,3 +179,26 @@ def test_rigid_body_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert_identical_outputs(*outs)
     assert_identical_outputs(outs[0], split)
+
+
+@pytest.mark.mpi
+def test_a_run_killed_mid_contact_continues_from_its_checkpoint_as_if_never_stopped(tmp_path):
+    """The spinning disk on the block on 2 ranks, checkpointed every 150 steps and killed
+    (SIGKILL, every process) soon after its first checkpoint, while the disk presses into
+    the block; `--restart latest` on 2 ranks to step 600 equals the uninterrupted run."""
+    scene = tmp_path / "rigid_disk.toml"
+    scene.write_text(DISK + "[output]\nhistory_every = 5\n")
+    straight, killed = tmp_path / "straight", tmp_path / "killed"
+    proc = parsph(["run", scene, "--out", straight, "--quiet", "--set", "time.max_steps=600"])
+    assert proc.returncode == 0, proc.stderr
+    cmd = [mpiexec(), "-n", "2", sys.executable, "-m", "parsph", "run", str(scene), "--out", str(killed), "--quiet",
+           "--set", "time.max_steps=100000", "--set", "time.end=1.0", "--set", "output.checkpoint_every=150"]
+    job = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    wait_for(lambda: list((killed / "checkpoints").glob("step_*.h5")), poll=0.05)
+    time.sleep(np.random.default_rng().uniform(0.0, 0.2))
+    assert len(kill_processes_mentioning(str(killed))) >= 2, job.communicate()
+    job.wait(timeout=CEILING)
+    proc = parsph(["run", scene, "--out", killed, "--quiet", "--set", "time.max_steps=600", "--set", "time.end=1.0",
+                   "--restart", "latest"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(straight, killed)
