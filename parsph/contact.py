@@ -149,9 +149,7 @@ class Contact:
 
     def _moved(self, x: np.ndarray) -> float:
         """The largest displacement of a contact particle of any rank since the lists were made."""
-        d = x[self.mine] - self._built_at
-        largest = float(np.sqrt(np.einsum("na,na->n", d, d).max())) if len(d) else 0.0
-        return self.comm.allreduce(largest, op=MPI.MAX)
+        return self.comm.allreduce(math.sqrt(_largest_move(x, self.mine, self._built_at)), op=MPI.MAX)
 
     def search(self, x: np.ndarray) -> None:
         """Contact ghosts (the other ranks' contact particles within the largest contact
@@ -188,7 +186,7 @@ class Contact:
         self.x[:n] = x
         self._refresh(x, self.x)
         points = np.concatenate([mine, np.arange(n, start)])
-        i, j = close_pairs(self.x[points], reach)
+        i, j = close_pairs(self.x[points], reach, self.body_all[points], self.entry_of >= 0)
         i, j = points[i], points[j]
         sep = self.x[j] - self.x[i]
         dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
@@ -216,6 +214,19 @@ class Contact:
         data = [np.ascontiguousarray(values[sel]) for sel in self.send.values()]
         requests += [self.comm.Isend(d, dest=r, tag=11) for r, d in zip(self.send, data)]
         MPI.Request.Waitall(requests)
+
+
+@njit(cache=True, _nrt=False)
+def _largest_move(x, rows, before):
+    """max_k |x[rows[k]] - before[k]|^2."""
+    largest = 0.0
+    for k in range(len(rows)):
+        d2 = 0.0
+        for a in range(x.shape[1]):
+            e = x[rows[k], a] - before[k, a]
+            d2 += e * e
+        largest = max(largest, d2)
+    return largest
 
 
 @njit(cache=True, _nrt=False)

@@ -70,17 +70,23 @@ def kdtree(points: np.ndarray):
     return cKDTree(points)
 
 
-def close_pairs(x: np.ndarray, r: float) -> tuple:
+def close_pairs(x: np.ndarray, r: float, group: np.ndarray | None = None, allowed: np.ndarray | None = None) -> tuple:
     """(i, j), i < j: every pair of points of x (n, d) at most r apart, and perhaps a few
-    more within a relative 1e-9 of r (callers test the distance themselves). A compiled
-    search over cells of size r; a cloud too wide for 2^20 cells per dimension goes to a
-    k-d tree."""
+    more within a relative 1e-9 of r (callers test the distance themselves); with `group`
+    (an index per point) only the pairs `allowed[group_i, group_j]` marks (the contact
+    between bodies: the points of one body are not paired with each other unless
+    allowed). A compiled search over cells of size r; a cloud too wide for 2^20 cells per
+    dimension goes to a k-d tree."""
     finite = r > 0 and bool(np.isfinite(x).all())
     lower = x.min(axis=0) if finite else None
     cells = np.floor((x.max(axis=0) - lower) / r).astype(np.int64) + 1 if finite else None
     if not finite or cells.max() > 1 << 20:
         pairs = kdtree(x).query_pairs(r=r, output_type="ndarray").astype(np.int64)
+        if group is not None:
+            pairs = pairs[allowed[group[pairs[:, 0]], group[pairs[:, 1]]]]
         return pairs[:, 0], pairs[:, 1]
+    if group is None:
+        group, allowed = np.zeros(0, np.int64), np.ones((1, 1), np.bool_)
     key = np.zeros(len(x), np.int64)
     for a in range(x.shape[1]):  # row-major cell number
         key = key * cells[a] + np.minimum(np.floor((x[:, a] - lower[a]) / r).astype(np.int64), cells[a] - 1)
@@ -92,20 +98,21 @@ def close_pairs(x: np.ndarray, r: float) -> tuple:
     r2 = r * r * (1.0 + 1e-9)
     counts = np.zeros(len(x), np.int64)
     empty = np.zeros(0, np.int64)
-    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, counts, empty, empty)
+    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, counts, empty, empty)
     start = np.zeros(len(x) + 1, np.int64)
     np.cumsum(counts, out=start[1:])
     i, j = np.empty(start[-1], np.int64), np.empty(start[-1], np.int64)
-    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, start, i, j)
+    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, start, i, j)
     return i, j
 
 
 @njit(cache=True)
-def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, where, i_out, j_out):
+def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, where, i_out, j_out):
     """For each point p, the points q > p in its cell and the adjacent ones with
-    |x_q - x_p|^2 <= r2: counted into where[p] (i_out empty), or written from where[p].
-    `first`: each cell's first position in `order` (all cells, and one past), or empty
-    (then found by bisection of sorted_keys)."""
+    |x_q - x_p|^2 <= r2 (and, if `group` is not empty, allowed[group[p], group[q]]):
+    counted into where[p] (i_out empty), or written from where[p]. `first`: each cell's
+    first position in `order` (all cells, and one past), or empty (then found by
+    bisection of sorted_keys)."""
     n, dim = x.shape
     fill = len(i_out) > 0
     stride = np.ones(dim, np.int64)
@@ -137,7 +144,7 @@ def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, where, i_out, j_ou
                 end = np.searchsorted(sorted_keys, code + 1)
             for m in range(m, end):
                 q = order[m]
-                if q <= p:
+                if q <= p or (len(group) and not allowed[group[p], group[q]]):
                     continue
                 d2 = 0.0
                 for a in range(dim):
