@@ -13,6 +13,7 @@ global id and position instead of being turned into NaNs.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,6 +82,55 @@ def reverse_index(pairs: Pairs) -> np.ndarray:
     return rev
 
 
+@njit(cache=True, _nrt=False)
+def _gather_rows(values, rev, out):
+    """out[p] = values[rev[p]], NaN where rev[p] < 0."""
+    for p in range(len(rev)):
+        q = rev[p]
+        for a in range(values.shape[1]):
+            out[p, a] = values[q, a] if q >= 0 else np.nan
+
+
+@njit(cache=True)
+def _condition_numbers(L, check, out):
+    """The 2-norm condition number of each matrix L[i] (dim x dim) with check[i], from the
+    extreme eigenvalues of L^T L in closed form (inf for a singular one)."""
+    dim = L.shape[1]
+    for i in range(len(L)):
+        if not check[i]:
+            continue
+        if dim == 1:
+            out[i] = 1.0 if L[i, 0, 0] != 0.0 else np.inf
+            continue
+        M = np.zeros((3, 3))
+        for a in range(dim):
+            for b in range(dim):
+                s = 0.0
+                for k in range(dim):
+                    s += L[i, k, a] * L[i, k, b]
+                M[a, b] = s
+        if dim == 2:
+            half = 0.5 * (M[0, 0] + M[1, 1])
+            root = math.sqrt(max(half * half - (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]), 0.0))
+            small, large = half - root, half + root
+        else:
+            q = (M[0, 0] + M[1, 1] + M[2, 2]) / 3.0
+            off = M[0, 1] ** 2 + M[0, 2] ** 2 + M[1, 2] ** 2
+            p = math.sqrt(((M[0, 0] - q) ** 2 + (M[1, 1] - q) ** 2 + (M[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
+            if p <= 1e-14 * q:
+                small = large = q
+            else:
+                for a in range(3):
+                    M[a, a] -= q
+                det = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+                       - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+                       + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+                r = max(-1.0, min(1.0, det / (2.0 * p ** 3)))
+                phi = math.acos(r) / 3.0
+                small, large = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
+        out[i] = math.sqrt(large / small) if small > 0.0 else np.inf
+
+
 @njit(cache=True)
 def _reverse_index(ptr, idx, rows, rev):
     """rev[p] for every pair of the rows: a scan of the neighbour's row, no temporaries."""
@@ -97,6 +147,10 @@ def _reverse_index(ptr, idx, rows, rev):
 
 def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
     """values of the reverse pairs (reverse_index), NaN where j has no row."""
+    if values.ndim == 2:
+        out = np.empty_like(values)
+        _gather_rows(values, rev, out)
+        return out
     out = values[np.maximum(rev, 0)]
     out[rev < 0] = np.nan
     return out
@@ -138,8 +192,7 @@ def reference_pairs(
         plain |= detached[:rows]
     ok &= ~plain
     condition[plain] = 1.0
-    if ok.any():
-        condition[ok] = np.linalg.cond(L[ok])
+    _condition_numbers(L, ok, condition)
     bad = ~(condition < MAX_CONDITION)
     if tolerant:
         plain |= bad
