@@ -16,8 +16,11 @@ The state (c, R, V, omega) is checkpointed.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from parsph.errors import InputError
 from parsph.exact_sum import allsum, totals
 
 
@@ -52,6 +55,39 @@ def rotation(angle: np.ndarray, dim: int) -> np.ndarray:
         K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
         return np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * (K @ K)
     return np.eye(dim)
+
+
+def held(body, constraints: list, dim: int, comm) -> bool:
+    """Whether [[bc]] `constraints` (bc.Constraint, on owned particles) hold the rigid `body`;
+    InputError if one holds only part of it: some particles, some components or for a
+    duration (collective)."""
+    count, out = body.last - body.first, False
+    for i, c in enumerate(constraints):
+        total = comm.allreduce(int(np.count_nonzero((c.index >= body.lo) & (c.index < body.hi))))
+        if total and (total != count or len(c.components) != dim or c.duration < math.inf):
+            raise InputError(f"bc[{i}] holds part of rigid body '{body.name}' ({total} of its {count} particles, "
+                             "or some components, or for a duration): a rigid body is held whole, every particle "
+                             "in every component for the whole run, or not at all")
+        out = out or total > 0
+    return out
+
+
+def stable_step(body, omega2: np.ndarray, v: np.ndarray, contact) -> tuple:
+    """(stable step, 0, its particle) of a rigid body (rows lo..hi): no strain; its
+    particles' contact springs (omega2, parsph.contact) and no particle moving more than a
+    quarter of the contact skin in a step (so that its contacts are seen coming); (inf, 0,
+    -1) if nothing bounds it."""
+    lo, hi = body.lo, body.hi
+    if contact is None or hi == lo:
+        return np.inf, 0.0, -1
+    springs = omega2[lo:hi]
+    speed = np.sqrt(np.einsum("na,na->n", v[lo:hi], v[lo:hi]))
+    steps = np.full(hi - lo, np.inf)
+    np.divide(2.0, np.sqrt(springs), out=steps, where=springs > 0)
+    np.minimum(steps, np.divide(0.25 * contact.skin, speed, out=np.full_like(speed, np.inf), where=speed > 0),
+               out=steps)
+    first = int(np.argmin(steps))
+    return (steps[first], 0.0, lo + first) if steps[first] < np.inf else (np.inf, 0.0, -1)
 
 
 class RigidBody:

@@ -46,6 +46,7 @@ from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, 
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.points import PointSet
+from parsph import rigid
 from parsph.rigid import RigidBody
 from parsph.walls import Walls
 
@@ -173,29 +174,18 @@ class Simulation:
 
     def _rigid_bodies(self, restart: dict | None) -> list:
         """The freely moving rigid bodies (parsph.rigid), from the particles' initial
-        velocities or the checkpoint; a rigid body that a [[bc]] holds is moved by it, and
-        must be held whole (collective)."""
+        velocities or the checkpoint (collective)."""
         out = []
         for b in self.bodies:
-            if not b.rigid:
-                continue
             with collective(self.comm):
-                held = [(i, self.comm.allreduce(int(np.count_nonzero((c.index >= b.lo) & (c.index < b.hi)))), c)
-                        for i, c in enumerate(self.bcs.items)]
-                count = b.last - b.first
-                for i, total, c in held:
-                    if total and (total != count or len(c.components) != self.dim or c.duration < math.inf):
-                        raise InputError(f"bc[{i}] holds part of rigid body '{b.name}' ({total} of its {count} "
-                                         "particles, or some components, or for a duration): a rigid body is held "
-                                         "whole, every particle in every component for the whole run, or not at all")
-            if any(total for _, total, _ in held):
-                continue
-            body = RigidBody(b, self.mass, self.X, self.v, self.comm)
-            if restart is None:
-                body.project(self.mass, self.X + self.u, self.v)
-            else:
-                body.restore(restart["totals"]["rigid"][len(out)])
-            out.append(body)
+                free = b.rigid and not rigid.held(b, self.bcs.items, self.dim, self.comm)
+            if free:
+                body = RigidBody(b, self.mass, self.X, self.v, self.comm)
+                if restart is None:
+                    body.project(self.mass, self.X + self.u, self.v)
+                else:
+                    body.restore(restart["totals"]["rigid"][len(out)])
+                out.append(body)
         return out
 
     # ----------------------------------------------------------------- set-up helpers
@@ -516,7 +506,7 @@ class Simulation:
         ref = self.ref
         for b in self.bodies:  # in row order: the first particle with the smallest step
             if b.rigid:
-                step, worst, first = self._rigid_step(b)
+                step, worst, first = rigid.stable_step(b, self.omega_c2, self.v, self.contact)
             else:
                 step, worst, first = tlsph.stable_time_step(
                     b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
@@ -555,21 +545,6 @@ class Simulation:
             error.agreed = True  # every rank found the same particle and raises this
             raise error
         return -reduced[0], reduced[1]
-
-    def _rigid_step(self, b: Body) -> tuple:
-        """(stable step, 0, its particle) of a rigid body: no strain; its particles' contact
-        springs, and no particle moving more than a quarter of the contact skin in a step
-        (so that its contacts are seen coming); (inf, 0, -1) if nothing bounds it."""
-        if self.contact is None or b.hi == b.lo:
-            return np.inf, 0.0, -1
-        springs = self.omega_c2[b.lo:b.hi]
-        speed = np.sqrt(np.einsum("na,na->n", self.v[b.lo:b.hi], self.v[b.lo:b.hi]))
-        steps = np.full(b.hi - b.lo, np.inf)
-        np.divide(2.0, np.sqrt(springs), out=steps, where=springs > 0)
-        np.minimum(steps, np.divide(0.25 * self.contact.skin, speed, out=np.full_like(speed, np.inf), where=speed > 0),
-                   out=steps)
-        first = int(np.argmin(steps))
-        return (steps[first], 0.0, b.lo + first) if steps[first] < np.inf else (np.inf, 0.0, -1)
 
     def _advice(self) -> str:
         """What to change when the run has become unstable."""
