@@ -45,7 +45,8 @@ LAWS = {"j2_plasticity": {"model": "j2_plasticity", "yield_stress": 1e6},
 
 def raw_block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.0, every: int = 0,
               method: str = "tlsph", law: str = "") -> dict:
-    """The block's scene as written (tools/bench_versions.py hands it to two versions)."""
+    """The block's scene as written (tools/bench_versions.py hands it to two versions); with
+    law "contact" as its two halves in contact (halves_in_contact)."""
     side = round(particles ** (1 / dim))
     spacing = 1.0 / side
     raw = {
@@ -64,7 +65,7 @@ def raw_block(dim: int, particles: int, alpha: float, form: str, eta: float = 0.
         raw["formulation"]["integration"] = "cells" if method.endswith("_cells") else "nodal"
     if method.endswith("_eulerian"):
         raw["formulation"]["kernel"] = "eulerian"
-    return raw
+    return halves_in_contact(raw) if law == "contact" else raw
 
 
 def block(*args, **kwargs) -> dict:
@@ -86,8 +87,7 @@ def halves_in_contact(raw: dict) -> dict:
 
 
 def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph", law=""):
-    raw = raw_block(dim, particles, alpha, form, eta, every, method, "" if law == "contact" else law)
-    scene = config.validate(halves_in_contact(raw) if law == "contact" else raw)
+    scene = block(dim, particles, alpha, form, eta, every, method, law)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
     sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
