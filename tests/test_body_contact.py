@@ -15,7 +15,7 @@ from parsph.contact import _repulsion
 from parsph.errors import InputError
 from physics import run_until, scene_from, simulation
 
-from conftest import RUNS, assert_identical_outputs, parsph
+from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
 
 WAVE_SPEED = math.sqrt(200.0e9 / 7850.0)  # the bars' (nu = 0)
 
@@ -245,12 +245,7 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     boundary with 3 ranks): the same history and final state bit for bit on 1 and 3 ranks,
     and a run checkpointed mid-contact on 2 ranks, restarted on 3, continues exactly."""
     coarse = ["--set", "parameters.spacing=2e-3", "--set", "time.end=4e-5"]
-    outs = []
-    for ranks in (1, 3):
-        out = tmp_path / f"ranks_{ranks}"
-        proc = parsph(["run", RUNS / "bars_impact.toml", "--out", out, "--quiet", *coarse], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
-        outs.append(out)
+    assert_same_on_ranks(RUNS / "bars_impact.toml", coarse, tmp_path / "bars")
     split = tmp_path / "split"
     proc = parsph(["run", RUNS / "bars_impact.toml", "--out", split, "--quiet", *coarse, "--set",
                    "time.max_steps=150", "--set", "output.checkpoint_every=150"], ranks=2)
@@ -258,16 +253,9 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     proc = parsph(["run", RUNS / "bars_impact.toml", "--out", split, "--quiet", *coarse, "--restart", "latest"],
                   ranks=3)
     assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(*outs)
-    assert_identical_outputs(outs[0], split)
+    assert_identical_outputs(tmp_path / "bars" / "ranks_1", split)
     rings = ["--set", "parameters.spacing=5e-3", "--set", "time.max_steps=120"]  # touching from step ~45
-    outs = []
-    for ranks in (1, 3):
-        out = tmp_path / f"rings_{ranks}"
-        proc = parsph(["run", RUNS / "rings_contact.toml", "--out", out, "--quiet", *rings], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
-        outs.append(out)
-    assert_identical_outputs(*outs)
+    assert_same_on_ranks(RUNS / "rings_contact.toml", rings, tmp_path / "rings")
 
 
 @pytest.mark.parametrize("contact, message", [
