@@ -816,6 +816,7 @@ class Simulation:
                 self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
                 self.eta, self.weighted_hessian, candidates=self.ref.candidates,
                 candidate_rev=self.ref.candidate_rev)
+            self._exclude_kernel_pairs()
             for b in self.bodies:
                 if b.formulation.type in galerkin.TYPES:
                     b.formulation.build(self, b, self.scene["kernel"]["type"])
