@@ -56,7 +56,7 @@ from numba import njit
 from parsph import COMPILED_SOURCE
 from parsph.formulations.base import CompiledOnce
 from parsph.materials import damage, update
-from parsph.materials.elastic import det, right_cauchy_green
+from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
@@ -368,28 +368,6 @@ def spacing_ratio(n, ptr, idx, x, measure, F, dim, out, C):
             nearest = min(nearest, r2)
         s_min = principal_stretches(F[i], dim, C)[0]
         out[i] = math.sqrt(nearest) / (measure[i] ** (1.0 / dim) * s_min) if s_min > 0 else 0.0
-
-
-@njit(cache=True, _nrt=False)
-def symmetric_extremes(C, dim):
-    """(smallest, largest) eigenvalue of the symmetric positive semi-definite dim x dim
-    block of C (a 3x3 array; in 3D its diagonal is overwritten), in closed form."""
-    if dim == 1:
-        return C[0, 0], C[0, 0]
-    if dim == 2:
-        half = 0.5 * (C[0, 0] + C[1, 1])
-        root = math.sqrt(max(half * half - (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]), 0.0))
-        return half - root, half + root
-    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
-    off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
-    p = math.sqrt(((C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
-    if p <= 1e-14 * q:  # (nearly) isotropic or zero: also keeps p**3 from underflowing to zero
-        return q, q
-    for a in range(3):
-        C[a, a] -= q
-    r = max(-1.0, min(1.0, det(C, 3) / (2.0 * p ** 3)))
-    phi = math.acos(r) / 3.0
-    return q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
 
 
 @njit(cache=True, _nrt=False)

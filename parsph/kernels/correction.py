@@ -21,6 +21,7 @@ from numba import njit
 
 from parsph.errors import InputError
 from parsph.kernels.functions import evaluate
+from parsph.materials.elastic import symmetric_extremes
 from parsph.neighbors import Pairs
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
@@ -91,43 +92,22 @@ def _gather_rows(values, rev, out):
             out[p, a] = values[q, a] if q >= 0 else np.nan
 
 
-@njit(cache=True)
-def _condition_numbers(L, check, out):
+@njit(cache=True, _nrt=False)
+def _condition_numbers(L, check, out, M):
     """The 2-norm condition number of each matrix L[i] (dim x dim) with check[i], from the
-    extreme eigenvalues of L^T L in closed form (inf for a singular one)."""
+    extreme eigenvalues of L^T L (materials.elastic.symmetric_extremes; inf for a singular
+    one). M: 3x3 scratch."""
     dim = L.shape[1]
     for i in range(len(L)):
         if not check[i]:
             continue
-        if dim == 1:
-            out[i] = 1.0 if L[i, 0, 0] != 0.0 else np.inf
-            continue
-        M = np.zeros((3, 3))
         for a in range(dim):
             for b in range(dim):
                 s = 0.0
                 for k in range(dim):
                     s += L[i, k, a] * L[i, k, b]
                 M[a, b] = s
-        if dim == 2:
-            half = 0.5 * (M[0, 0] + M[1, 1])
-            root = math.sqrt(max(half * half - (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]), 0.0))
-            small, large = half - root, half + root
-        else:
-            q = (M[0, 0] + M[1, 1] + M[2, 2]) / 3.0
-            off = M[0, 1] ** 2 + M[0, 2] ** 2 + M[1, 2] ** 2
-            p = math.sqrt(((M[0, 0] - q) ** 2 + (M[1, 1] - q) ** 2 + (M[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
-            if p <= 1e-14 * q:
-                small = large = q
-            else:
-                for a in range(3):
-                    M[a, a] -= q
-                det = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
-                       - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
-                       + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
-                r = max(-1.0, min(1.0, det / (2.0 * p ** 3)))
-                phi = math.acos(r) / 3.0
-                small, large = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
+        small, large = symmetric_extremes(M, dim)
         out[i] = math.sqrt(large / small) if small > 0.0 else np.inf
 
 
@@ -192,7 +172,7 @@ def reference_pairs(
         plain |= detached[:rows]
     ok &= ~plain
     condition[plain] = 1.0
-    _condition_numbers(L, ok, condition)
+    _condition_numbers(L, ok, condition, np.empty((3, 3)))
     bad = ~(condition < MAX_CONDITION)
     if tolerant:
         plain |= bad

@@ -184,3 +184,25 @@ def _tait(F, dim, b, gamma, P, Finv):
     if gamma == 1.0:
         return b * (J - 1.0 - math.log(J))
     return b * ((J ** (1.0 - gamma) - 1.0) / (gamma - 1.0) + J - 1.0)
+
+
+@njit(cache=True, _nrt=False)
+def symmetric_extremes(C, dim):
+    """(smallest, largest) eigenvalue of the symmetric positive semi-definite dim x dim
+    block of C (a 3x3 array; in 3D its diagonal is overwritten), in closed form."""
+    if dim == 1:
+        return C[0, 0], C[0, 0]
+    if dim == 2:
+        half = 0.5 * (C[0, 0] + C[1, 1])
+        root = math.sqrt(max(half * half - (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]), 0.0))
+        return half - root, half + root
+    q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3.0
+    off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
+    p = math.sqrt(((C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2 + 2.0 * off) / 6.0)
+    if p <= 1e-14 * q:  # (nearly) isotropic or zero: also keeps p**3 from underflowing to zero
+        return q, q
+    for a in range(3):
+        C[a, a] -= q
+    r = max(-1.0, min(1.0, det(C, 3) / (2.0 * p ** 3)))
+    phi = math.acos(r) / 3.0
+    return q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
