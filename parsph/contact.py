@@ -92,23 +92,23 @@ class Contact:
         self.entry_of = np.full((count, count), -1, np.int64)  # body pair -> entry
         for k, (a, b) in enumerate(self.entries):
             self.entry_of[a, b] = self.entry_of[b, a] = k
-        self.factor = np.array([s["stiffness"] for s in specs])
+        self.factor = np.array([s["stiffness"] for s in specs])  # on the stiffness, per entry
         self.zeta = np.array([damping_ratio(s["restitution"]) for s in specs])
         self.friction = np.array([s["friction"] for s in specs])
         self.dissipative = bool((self.zeta > 0).any() or (self.friction > 0).any())
         self.dt = math.inf  # the step the forces are for (the friction's limit)
         touching = np.zeros(count, bool)
         touching[[b for pair in self.entries for b in pair]] = True
-        factor = np.zeros(count)
-        for s in specs:  # each body's contact radius factor: its entries agree (config)
-            factor[[index[name] for name in s["bodies"]]] = s["radius"]
+        radius_factor = np.zeros(count)
+        for s in specs:  # each body's: its entries agree (config)
+            radius_factor[[index[name] for name in s["bodies"]]] = s["radius"]
         modulus = np.array([contact_modulus(b.constants, dim) for b in bodies])
         self.dim, self.comm, self.n = dim, comm, n
         self.scale = thickness if dim < 3 else 1.0  # the thickness (2D) or the cross-section (1D)
         self.body = body[:n]
         self.gid = gid[:n]
         self.mass = mass[:n]
-        self.radius = 0.5 * factor[body[:n]] * measure[:n] ** (1.0 / dim)
+        self.radius = 0.5 * radius_factor[body[:n]] * measure[:n] ** (1.0 / dim)
         self.modulus = modulus[body[:n]]
         self.mine = np.flatnonzero(touching[body[:n]])  # owned particles of bodies in contact
         largest = float(self.radius.max()) if n else 0.0
@@ -121,7 +121,7 @@ class Contact:
         self.entry_force = np.zeros((len(self.entries), n, dim))  # each entry's force from the other body
         self.closest = np.ones(n)  # |x_ij| / (r_i + r_j) of the closest candidate
         self._built_at = None  # owned contact particles' positions when the lists were made
-        self.selfish = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
+        self.self_contact = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
         self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
 
     def evaluate(self, x: np.ndarray, v: np.ndarray) -> None:
@@ -193,7 +193,7 @@ class Contact:
         keep = (dist < self.radius_all[i] + self.radius_all[j] + 2.0 * self.skin) & \
             (self.entry_of[self.body_all[i], self.body_all[j]] >= 0)
         i, j = i[keep], j[keep]
-        if self.selfish:  # a body touches itself only where the kernel does not join it
+        if self.self_contact:  # a body touches itself only where the kernel does not join it
             kernel = np.isin(pair_keys(self.gid_all[i], self.gid_all[j]), self.kernel_pairs)
             keep = ~(kernel & (self.body_all[i] == self.body_all[j]))
             i, j = i[keep], j[keep]

@@ -362,7 +362,7 @@ class Simulation:
 
     def _exclude_kernel_pairs(self) -> None:
         """Tell a self-contact the kernel's pairs (of the owned rows), which it leaves out."""
-        if self.contact and self.contact.selfish:
+        if self.contact and self.contact.self_contact:
             rows = np.repeat(np.arange(self.n_owned), np.diff(self.ref.ptr))
             self.contact.exclude(np.unique(pair_keys(self.gid[rows], self.gid[self.ref.idx])))
 
