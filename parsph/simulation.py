@@ -55,7 +55,7 @@ UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [
 TOTALS = ("hourglass_work",  # absorbed by the "paper" hourglass forces
           "viscous_work",  # absorbed by the artificial viscosity
           "contact_work",  # absorbed by contact damping and friction
-          "hourglass_released",  # penalty dropped at reference updates
+          "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
           "external_work")
 
 
@@ -985,7 +985,7 @@ class Simulation:
         (V^0 w_p), damage work (the work the particles have taken beyond their strain energy
         and plastic work, V^0 (W - psi - w_p): materials.damage), viscous work (absorbed by
         the artificial viscosity), hourglass (the particles' penalty, the work absorbed on
-        this rank by the paper form, the penalty released at reference updates), contact
+        this rank by the paper form, the penalty released since), contact
         (each particle's half of its pairs' potential: parsph.contact), contact work
         (absorbed by contact damping and friction) and external work."""
         out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "contact": [],

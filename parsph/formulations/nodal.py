@@ -100,6 +100,15 @@ class NodalFormulation:
                                                               sim.material_state(body)[0][lo:hi], modulus)
                 if body.failure_strain is not None:
                     modulus *= damage.hourglass_factor(sim.damage_state(body)[0][lo:hi])
+                if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
+                    # the penalty E_i sum_j c_ij |e_ij|^2 / 2 of the last evaluation drops with the
+                    # modulus without work: counted as released (as at reference updates)
+                    old = sim.youngs[lo:hi]
+                    changed = (modulus != old) & (old > 0.0)  # a penalty at E = 0 is 0
+                    if changed.any():
+                        ratio = modulus / np.where(changed, old, 1.0)
+                        drop = np.where(changed, sim.hg_psi[lo:hi] * (1.0 - ratio), 0.0)
+                        sim.totals["hourglass_released"][body.index].add(drop)
                 sim.youngs[lo:hi] = modulus
             out.append(Stage("kinematics+stress", hourglass_modulus, writes=("youngs",)))
         if hessian:
