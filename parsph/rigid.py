@@ -93,9 +93,9 @@ def stable_step(body, omega2: np.ndarray, v: np.ndarray, contact) -> tuple:
 class RigidBody:
     """A freely moving rigid body: its mass, reference centre and inertia, and its state."""
 
-    def __init__(self, body, mass: np.ndarray, X: np.ndarray, v: np.ndarray, comm):
-        """body: the simulation's Body (its owned rows lo..hi); mass, X, v: of the local
-        particles; the initial V and omega from the particles' momenta (collective)."""
+    def __init__(self, body, mass: np.ndarray, X: np.ndarray, comm):
+        """body: the simulation's Body (its owned rows lo..hi); mass, X: of the local
+        particles; at rest until `project` gives it its particles' momenta (collective)."""
         self.body, self.comm = body, comm
         lo, hi = body.lo, body.hi
         dim = X.shape[1]

@@ -180,7 +180,7 @@ class Simulation:
             with collective(self.comm):
                 free = b.rigid and not rigid.held(b, self.bcs.items, self.dim, self.comm)
             if free:
-                body = RigidBody(b, self.mass, self.X, self.v, self.comm)
+                body = RigidBody(b, self.mass, self.X, self.comm)
                 if restart is None:
                     body.project(self.mass, self.X + self.u, self.v)
                 else:
@@ -204,7 +204,9 @@ class Simulation:
             self.decomp = Decomposition(local, self.comm, mirrors, layer2=layer2)
             body = np.searchsorted(self.offsets, local.gid % local.total, side="right") - 1
             self.detached = self._failed(fl.get("damage"), body)
-            cut = self._crack(fl["X"], fl["measure"], fl["support"], local.gid, n, self.detached)
+            failed = self.detached is not None and self.detached[:n].any()
+            searched = find_pairs(fl["X"], fl["support"], local.gid, n) if failed else None
+            cut = self._crack(searched, fl["X"], fl["measure"], local.gid, n, self.detached)
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
@@ -298,16 +300,16 @@ class Simulation:
         breaking = np.array([b.breaks_pairs for b in self.bodies])
         return breaking[body[: len(state)]] & (state[:, damage.DAMAGE] >= 1.0)
 
-    def _crack(self, X: np.ndarray, measure: np.ndarray, support: np.ndarray, gid: np.ndarray, n: int,
+    def _crack(self, searched, X: np.ndarray, measure: np.ndarray, gid: np.ndarray, n: int,
                detached) -> np.ndarray | None:
         """The keys of the pairs the failed particles cut (neighbors.crossing), over all ranks:
-        each owned failed particle's from its neighbours in the reference X (collective)."""
+        each owned failed particle's from its neighbours in the reference X (`searched`:
+        neighbors.find_pairs of the owned rows, needed where one has failed) (collective)."""
         if detached is None:
             return None
         failed = np.flatnonzero(detached[:n])
         keys = np.zeros(0, np.int64)
         if len(failed):
-            searched = find_pairs(X, support, gid, n)
             keys = crossing(searched, X, gid, measure ** (1.0 / self.dim), failed)
         return np.unique(np.concatenate(self.comm.allgather(keys)))
 
@@ -326,11 +328,12 @@ class Simulation:
         new = self._failed(state[:n], self.body) & ~self.detached[:n]
         if not self.comm.allreduce(bool(new.any()), op=MPI.LOR):
             return
+        searched = find_pairs(self.X, self.support, self.gid, n)  # in the reference: once for every round
         while True:
             self.decomp.refresh_all(state)
             detached = self._failed(state, self.body)
             with collective(self.comm):
-                cut = self._crack(self.X, self.measure, self.support, self.gid, n, detached)
+                cut = self._crack(searched, self.X, self.measure, self.gid, n, detached)
                 ref = reference.build(
                     self.X, self.measure, self.volume, self.support, self.gid, n, self.decomp.n_rows,
                     self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
@@ -339,10 +342,8 @@ class Simulation:
             if not self.comm.allreduce(len(ref.bad)):
                 break
             state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
-        self.ref, self.detached = ref, detached
+        self.ref, self.detached = ref, detached  # the stages read sim.ref when they run
         self._exclude_kernel_pairs()
-        for b in self.bodies:
-            b.stages = [] if b.rigid else b.formulation.stages(self, b)
         penalty = self.hg_psi.copy()
         work = state[:, damage.WORK].copy()
         F_old = self.F[:n].copy()
