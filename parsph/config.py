@@ -702,6 +702,9 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
                                          or form["integration"] == "cells"):
         raise InputError(f"{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'kbm' and 'efg' with "
                          f"nodal integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
+    if form["kernel"] == "eulerian" and form["hourglass"] > 0:
+        raise InputError(f"{path}.hourglass applies to a Lagrangian kernel: with kernel = 'eulerian' the reference "
+                         "is the current configuration, where F explains every separation (give 0 or leave it out)")
     for key in ("search_every", "skin"):
         if form[key] is not None and form["kernel"] != "eulerian":
             raise InputError(f"{path}.{key} applies to kernel = 'eulerian'")

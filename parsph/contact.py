@@ -55,6 +55,7 @@ from mpi4py import MPI
 from numba import njit
 
 from parsph.neighbors import close_pairs, pair_keys
+from parsph.relations import Skin
 
 SKIN = 0.5  # of the largest contact distance
 
@@ -120,7 +121,7 @@ class Contact:
         self.omega2 = np.zeros(n)  # the springs' bound on the squared frequency
         self.entry_force = np.zeros((len(self.entries), n, dim))  # each entry's force from the other body
         self.closest = np.ones(n)  # |x_ij| / (r_i + r_j) of the closest candidate
-        self._built_at = None  # owned contact particles' positions when the lists were made
+        self.rule = Skin(self.skin, comm)  # when the lists are searched again
         self.self_contact = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
         self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
 
@@ -128,7 +129,7 @@ class Contact:
         """The contact forces, energies and spring bounds at the owned particles' current
         positions x and velocities v (n, dim) (collective: ghost positions and, with
         dissipation, velocities; the lists when due)."""
-        if self._built_at is None or self._moved(x) > 0.5 * self.skin:
+        if self.rule.due(x, self.mine):
             self.search(x)
         else:
             self._refresh(x, self.x)
@@ -145,17 +146,13 @@ class Contact:
         """The kernel's pairs (their pair_keys, sorted) that self-contact leaves out, after the
         reference's pairs changed: the lists are searched again at the next evaluation."""
         self.kernel_pairs = keys
-        self._built_at = None
-
-    def _moved(self, x: np.ndarray) -> float:
-        """The largest displacement of a contact particle of any rank since the lists were made."""
-        return self.comm.allreduce(math.sqrt(_largest_move(x, self.mine, self._built_at)), op=MPI.MAX)
+        self.rule.forget()
 
     def search(self, x: np.ndarray) -> None:
         """Contact ghosts (the other ranks' contact particles within the largest contact
         distance plus the skin of this rank's) and candidate lists."""
         n, comm, reach = self.n, self.comm, self.distance + 2.0 * self.skin
-        self._built_at = x[self.mine].copy()
+        self.rule.searched(x, self.mine)
         mine = self.mine
         own = x[mine]
         boxes = comm.allgather((own.min(axis=0), own.max(axis=0)) if len(own) else None)
@@ -214,19 +211,6 @@ class Contact:
         data = [np.ascontiguousarray(values[sel]) for sel in self.send.values()]
         requests += [self.comm.Isend(d, dest=r, tag=11) for r, d in zip(self.send, data)]
         MPI.Request.Waitall(requests)
-
-
-@njit(cache=True, _nrt=False)
-def _largest_move(x, rows, before):
-    """max_k |x[rows[k]] - before[k]|^2."""
-    largest = 0.0
-    for k in range(len(rows)):
-        d2 = 0.0
-        for a in range(x.shape[1]):
-            e = x[rows[k], a] - before[k, a]
-            d2 += e * e
-        largest = max(largest, d2)
-    return largest
 
 
 @njit(cache=True, _nrt=False)

@@ -5,13 +5,12 @@ support is the mean of the two particles' supports, so the relation and every pa
 quantity are symmetric in i and j. Rows are sorted by global id so that every sum over a
 row runs in an order that does not depend on how particles are numbered on a rank.
 An Eulerian kernel keeps lists found with a skin beyond the supports (candidates) and picks
-the neighbours from them at each step (from_candidates) until a particle has moved half the
-skin.
+the neighbours from them at each step (kernels.correction.KeptPairs) until a particle has
+moved half the skin.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -156,34 +155,6 @@ def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, wh
                     k += 1
         if not fill:
             where[p] = k
-
-
-def from_candidates(candidates: Pairs, positions: np.ndarray, support: np.ndarray) -> tuple:
-    """(the pairs of `candidates` (lists found with a skin) closer than the mean of their
-    supports at `positions`, which candidates they are): what find_pairs would find now, in
-    the same order, as long as no particle has moved half the skin since the candidates
-    were found."""
-    keep = np.empty(len(candidates.idx), np.bool_)
-    ptr = np.empty(candidates.rows + 1, np.int64)
-    _within(candidates.ptr, candidates.idx, positions, support, keep, ptr)
-    return Pairs(ptr, candidates.idx[keep]), keep
-
-
-@njit(cache=True)
-def _within(ptr, idx, positions, support, keep, out_ptr):
-    dim = positions.shape[1]
-    out_ptr[0] = 0
-    for i in range(len(ptr) - 1):
-        count = 0
-        for p in range(ptr[i], ptr[i + 1]):
-            j = idx[p]
-            s = 0.0
-            for a in range(dim):
-                d = positions[j, a] - positions[i, a]
-                s += d * d
-            keep[p] = math.sqrt(s) < 0.5 * (support[i] + support[j])
-            count += keep[p]
-        out_ptr[i + 1] = out_ptr[i] + count
 
 
 def within_bodies(pairs: Pairs, body: np.ndarray) -> Pairs:

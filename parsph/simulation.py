@@ -46,6 +46,7 @@ from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, 
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.points import PointSet
+from parsph.relations import Skin
 from parsph import rigid
 from parsph.rigid import RigidBody
 from parsph.walls import Walls
@@ -104,6 +105,7 @@ class Simulation:
                        for b, spec in enumerate(specs)]
         forms = [b.formulation for b in self.bodies]
         self.updated = any(f.updated for f in forms)  # one body only (config)
+        self.eulerian = any(f.eulerian for f in forms)  # the reference moves at every step, inside it
         self.breaking = any(b.breaks_pairs for b in self.bodies)
         self.eta = max(f.eta for f in forms)  # the bodies with Hessian stabilisation share it (config)
         self.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
@@ -111,13 +113,11 @@ class Simulation:
         self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
         # an Eulerian kernel's neighbour lists and ghost layers: searched at most every
         # search_every steps, kept while no particle has moved half the skin since
-        self.search_every = config.search_every(specs[0]["formulation"])
         supports = local.fields["support"][: local.n_owned]
-        self.skin_length = config.skin(specs[0]["formulation"]) * comm.allreduce(
-            float(supports.max()) if len(supports) else 0.0, op=MPI.MAX)
+        self.search_rule = Skin(config.skin(specs[0]["formulation"]) * comm.allreduce(
+            float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
+            config.search_every(specs[0]["formulation"]))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
-        self._since_search = self.search_every
-        self.searches = 0  # neighbour searches at reference updates so far
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
         if self.updated:
             owners.add("updated")
@@ -200,7 +200,7 @@ class Simulation:
             local, mirrors = add_images(local, ref[0], self.scene["symmetry"], self.comm)
             fl, n, dim = local.fields, local.n_owned, self.dim
             # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
-            layer2 = self.search_every > 1 or self.breaking
+            layer2 = self.search_rule.every > 1 or self.breaking
             self.decomp = Decomposition(local, self.comm, mirrors, layer2=layer2)
             body = np.searchsorted(self.offsets, local.gid % local.total, side="right") - 1
             self.detached = self._failed(fl.get("damage"), body)
@@ -210,7 +210,7 @@ class Simulation:
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.weighted_hessian, skin=self.skin, detached=self.detached,
+                self.eta, self.weighted_hessian, skin=self.skin if self.eulerian else None, detached=self.detached,
                 cut=cut)
         if layer2:
             keep = len(local.gid)
@@ -238,7 +238,7 @@ class Simulation:
             self.Fr = np.ascontiguousarray(fl["Fr"][:keep] if "Fr" in fl else eye)
             self.measure_r = fl["measure_r"][:keep] if "measure_r" in fl else self.measure.copy()
             self.volume_r = fl["volume_r"][:keep] if "volume_r" in fl else self.volume.copy()
-            self.shift = self.Xr - self.X
+            self.shift = self._reference_shift()
             self.d = np.zeros((keep, dim))
             self.fs = np.zeros((keep, dim, dim))
         self.f = np.zeros((keep, dim, dim) if self.eta > 0 else (0, dim, dim))
@@ -288,6 +288,14 @@ class Simulation:
             b.stages = [] if b.rigid else b.formulation.stages(self, b)
             if b.rigid:
                 self.F[b.lo:b.hi] = np.eye(dim)
+
+    def _reference_shift(self) -> np.ndarray:
+        """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
+        X^r = X + u (as it is after every move of its reference), so that d is exactly zero
+        in the new reference, however the lists were found (formulations.tlsph.stress_at)."""
+        if self.eulerian:
+            return np.where(self.X + self.u == self.Xr, self.u, self.Xr - self.X)
+        return self.Xr - self.X
 
     def _failed(self, state: np.ndarray | None, body: np.ndarray) -> np.ndarray | None:
         """Which local particles of bodies whose failed particles lose their pairs have
@@ -557,17 +565,26 @@ class Simulation:
         return f"reduce time.dt = {dt:.3g} s{cfl}, raise formulation.hourglass or refine the particles"
 
     # ----------------------------------------------------------------- the step
-    def compute_forces(self) -> None:
+    def compute_forces(self, move_reference: bool = False) -> None:
         """The bodies' stages at the current u, phase by phase; before each phase the ghost
         values of the fields it reads at neighbours that are stale are refreshed (the
-        displacement always: the integrator moved it). Sets self.force and self.acc (owned)."""
+        displacement always: the integrator moved it). With `move_reference` (an Eulerian
+        kernel's step) the reference moves to the current configuration once F and the
+        stress are known, before the force row. Sets self.force and self.acc (owned)."""
         n = self.n_owned
         clock = time.perf_counter
         seconds = self.stage_seconds
         stale = {"d", "v"}  # moved by the integrator (v is refreshed only if a stage reads it)
         phases = max(len(b.stages) for b in self.bodies)
-        for k in range(phases):
+        k = 0
+        while k < phases:
             phase = [b.stages[k] for b in self.bodies if k < len(b.stages)]
+            if move_reference and any(stage.force_row for stage in phase):
+                move_reference = False
+                if self._move_reference():  # searched: new arrays, the whole evaluation in the new reference
+                    self.compute_forces()
+                    return
+                continue  # the same phase, with the stages of the new reference
             reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
             if reads:
                 t0 = clock()
@@ -584,6 +601,7 @@ class Simulation:
                                       f"unstable: {self._advice()}") from None
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
+            k += 1
         force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.viscous:
             force += self.f_visc
@@ -684,7 +702,7 @@ class Simulation:
             v_half, u_drift = self.v[:n].copy(), self.u[:n].copy()
             self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
             contact = (v_half, self.v[:n] - v_half, self.u[:n] - u_drift)
-        self.compute_forces()
+        self.compute_forces(move_reference=self.eulerian)
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t)
         du = self.u[:n] - u_old
@@ -719,8 +737,8 @@ class Simulation:
         clock = time.perf_counter()
         self._stable_dt, strain = self.stable_time_step()
         self.stage_seconds["stable step"] += time.perf_counter() - clock
-        if self.updated and ((self.update_every and self.since_update >= self.update_every)
-                             or (self.update_strain and strain > self.update_strain)):
+        if self.updated and not self.eulerian and ((self.update_every and self.since_update >= self.update_every)
+                                                   or (self.update_strain and strain > self.update_strain)):
             self.update_reference()
             self._stable_dt = self.stable_time_step()[0]
         return dt
@@ -737,36 +755,34 @@ class Simulation:
         return kinetic + 0.5 * dt * self.force * dv - 0.5 * (force_old + self.force) * du
 
     def update_reference(self) -> None:
+        """Make the current configuration the reference [V §3.1] between steps
+        (_move_reference) and evaluate the forces in it."""
+        self._move_reference()
+        self.compute_forces()
+        self._external = self.external_force()
+
+    def _move_reference(self) -> bool:
         """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
         V^r = J V^0 (Remark 1); re-decide ownership (parallel RCB of X^r) if the work is
         out of balance, migrate the particles with their state, find ghosts and neighbours
-        in X^r, rebuild the corrections and evaluate the forces in the new reference. An
-        Eulerian kernel (an update at every step) searches at most every search_every
-        steps, with lists and ghost layers a skin wider, and in between rebuilds the
-        reference on the kept lists (_recommit): the same result as a search every step."""
+        in X^r and rebuild the corrections. An Eulerian kernel (a move inside every step)
+        searches at most every search_every steps, with lists and ghost layers a skin wider,
+        and in between rebuilds the reference on the kept lists (_recommit): the same result
+        as a search every step. Returns whether it searched (the arrays are new)."""
         start = time.perf_counter()
         for b in self.bodies:  # the penalty restarts at 0
             self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
-        if self.search_every > 1 and not self._search_due():
-            self._recommit()
-        else:
+        n = self.n_owned
+        searching = self.search_rule.every == 1 or self.search_rule.due(self.X[:n] + self.u[:n])
+        if searching:
             self._search()
-        self._since_search += 1
+        else:
+            self._recommit()
+        self.search_rule.stepped()
         self.stage_seconds["reference update"] += time.perf_counter() - start
-        self.compute_forces()
-        self._external = self.external_force()
         self.updates += 1
         self.since_update = 0
-
-    def _search_due(self) -> bool:
-        """Whether the Eulerian kernel's lists must be searched again: search_every steps
-        since the last search, or a particle moved half the skin since (collective)."""
-        if self._since_search >= self.search_every:
-            return True
-        n = self.n_owned
-        moved = self.X[:n] + self.u[:n] - self._searched
-        largest = float(np.sqrt(np.einsum("na,na->n", moved, moved).max())) if n else 0.0
-        return self.comm.allreduce(largest, op=MPI.MAX) > 0.5 * self.skin
+        return searching
 
     def _search(self) -> None:
         """The reference update with a new decomposition: ownership, ghosts, neighbours."""
@@ -780,27 +796,28 @@ class Simulation:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
             if work.max() > (1.0 + self.rebalance) * work.mean():
                 owned = partition(owned, "Xr", self.comm)
-        self.skin = self.skin_length if self.search_every > 1 else 0.0
+        self.skin = self.search_rule.length if self.search_rule.every > 1 else 0.0
         with collective(self.comm):
             local = localize(owned, sets, "Xr", self.comm, self.skin) if sets else \
                 add_ghosts(owned, "Xr", self.comm, skin=self.skin)
         with self._update_failure():
             self._adopt(local)
-        self._searched = self.Xr[: self.n_owned].copy()
-        self._since_search = 0
-        self.searches += 1
+        self.search_rule.searched(self.Xr[: self.n_owned])
 
     def _recommit(self) -> None:
         """The reference update between searches (Eulerian kernel): X^r = x, F^r = F,
         V^r = J V^0 on the owned particles (and their moved stress points), every carried
         field refreshed on both ghost layers, then the reference data and the Galerkin
         relations rebuilt on the kept neighbour lists: the same as _search gives, without
-        repartitioning or finding neighbours."""
+        repartitioning or finding neighbours. F, the stress and VP (formed for the current
+        configuration) stand; the motion from the new reference is the identity."""
         n = self.n_owned
+        eye = np.eye(self.dim)
         for name, points in self.sets.items():
             A = points.arrays
             A["Xr"][: points.n_owned] = self._moved(name)
             A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
+            A["fs"][:] = eye
             points.refresh("Xr", "Fr")
         self.Xr[:n] = self.X[:n] + self.u[:n]
         self.Fr[:n] = self.F[:n]
@@ -808,19 +825,19 @@ class Simulation:
         self.volume_r[:n] = self.J[:n] * self.volume[:n]
         self.decomp.refresh_all(*(self.particles.arrays[name] for name in fields.migrating(self.carried)
                                   if name != "gid"))
-        np.subtract(self.Xr, self.X, out=self.shift)
+        self.shift[:] = self.u  # d = 0 exactly (_reference_shift)
         self.d[:] = 0.0
+        self.fs[:] = eye
         self.hg_psi[:] = 0.0
         with self._update_failure(), collective(self.comm):
             self.ref = reference.build(
                 self.Xr, self.measure_r, self.volume_r, self.support, self.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.weighted_hessian, candidates=self.ref.candidates,
-                candidate_rev=self.ref.candidate_rev)
+                self.eta, self.weighted_hessian, kept=self.ref.kept)
             self._exclude_kernel_pairs()
             for b in self.bodies:
                 if b.formulation.type in galerkin.TYPES:
-                    b.formulation.build(self, b, self.scene["kernel"]["type"])
+                    b.formulation.build(self, b, self.scene["kernel"]["type"], search=False)
         if self.collocation:
             self.collocation = BoundaryCollocation(self)
         for b in self.bodies:

@@ -65,3 +65,6 @@ class Stage:
     run: Callable[[], None]
     reads: tuple = ()  # fields read at neighbours: their ghost values must be current
     writes: tuple = ()  # fields written on owned particles (ghost values become stale)
+    # a pass of the force row, which needs the state (F, stress) only: an Eulerian kernel
+    # moves its reference to the current configuration before the first one
+    force_row: bool = False

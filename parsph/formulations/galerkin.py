@@ -44,11 +44,12 @@ from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations.base import CompiledOnce, Stage
 from parsph.formulations.reference import PairOptions
+from parsph.formulations import tlsph
 from parsph.formulations.tlsph import gradient_row, stress_at
-from parsph.kernels.correction import MAX_CONDITION
-from parsph.kernels.functions import evaluate
+from parsph.kernels import shape as kernel_shape
+from parsph.kernels.functions import KERNEL_NAMES
 from parsph.materials import update
-from parsph.relations import find_relation
+from parsph.relations import KeptRelation, Relation, find_relation
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
 TYPES = ("kbm", "efg")
@@ -81,103 +82,50 @@ def integration_set(formulation: dict) -> str | None:
 
 
 # ------------------------------------------------------------------ shape functions
-def _kernel_pairs(relation, x_eval, x_node, support, kernel, node_of_pair, eval_of_pair):
-    """Per pair: W_J(X_q) and its gradient with respect to X_q, J = node, q = evaluation point."""
-    dim = x_eval.shape[1]
-    sep = x_eval[eval_of_pair] - x_node[node_of_pair]
-    dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
-    w, dwdr, _ = evaluate(kernel, dist, support[node_of_pair], dim)
-    scale = np.divide(dwdr, dist, out=np.zeros_like(dist), where=dist > 0)
-    return w, scale[:, None] * sep, sep
+def _what(points: str) -> str:
+    return "particle" if points == "particles" else points[:-1].replace("_", " ")
 
 
-def _inverse(matrices, active, counts, x_rows, gid_rows, matrix, what):
-    """Inverses of the active rows' matrices (the others are set to the identity); raises
-    InputError naming the first active point whose matrix is singular or ill-conditioned."""
-    n = len(matrices)
-    matrices[~active] = np.eye(matrices.shape[1])
-    condition = np.linalg.cond(matrices) if n else np.zeros(0)
-    bad = active & ~(condition < MAX_CONDITION)
-    if bad.any():
-        first = int(np.flatnonzero(bad)[0])
-        where = ", ".join(f"{c:.6g}" for c in x_rows[first])
-        raise InputError(
-            f"the {matrix} of {what} {int(gid_rows[first])} at ({where}) is singular or ill-conditioned "
-            f"(condition number {condition[first]:.3g}, {int(counts[first])} particles in reach); "
-            f"{int(bad.sum())} point(s) affected. Increase kernel.support")
-    return np.linalg.inv(matrices) if n else matrices
-
-
-def trial_gradients(shape, relation, x_rows, x_cols, support, kernel, gid_rows, active, what):
+def trial_gradients(shape: str, relation: Relation, x_rows, x_cols, support, kernel: str, gid_rows, active):
     """(G per pair of `relation` from integration points to particles, per-row data the
-    test gradients need, the shape function values Phi_J(X_q) per pair): shape "kbm" (row
-    data S, grad S; Phi_J = W_J / S) or "mls" (M^-1, grad M; Phi_J = (M^-1 p_J)_0 W_J).
-    Rows not `active` get the identity; an active row with no particle or a singular matrix
-    raises InputError naming it."""
+    test gradients need, the shape function values Phi_J(X_q) per pair), kernels.shape:
+    "kbm" (Shepard) or "mls". Rows not `active` get neutral data; an active row with no
+    particle or a singular matrix raises InputError naming it."""
     dim = x_rows.shape[1]
-    n = len(relation.ptr) - 1
-    row, j = relation.row_of_pair(), relation.idx
-    counts = np.diff(relation.ptr)
-    empty = active & (counts == 0)
-    if empty.any():
-        first = int(np.flatnonzero(empty)[0])
-        where = ", ".join(f"{c:.6g}" for c in x_rows[first])
-        raise InputError(f"{what} {int(gid_rows[first])} at ({where}) lies in no particle's kernel support; "
-                         "increase kernel.support")
-    w, grad, _ = _kernel_pairs(relation, x_rows, x_cols, support, kernel, j, row)
+    m = dim + 1
+    n, pairs = len(relation.ptr) - 1, len(relation.idx)
+    G, phi = np.empty((pairs, dim)), np.empty(pairs)
+    data = np.empty((n, kernel_shape.row_data_width(shape, dim)))
+    kind, report = KERNEL_NAMES.index(kernel), np.zeros(2)
+    size = dim if shape == "kbm" else m
+    scratch = (np.empty((size, size)), np.empty((size, size)), np.empty((size, 2 * size)), np.empty(dim))
+    kbm_trial, mls_trial, _ = kernel_shape.compile_shape(dim)
     if shape == "kbm":
-        S = np.bincount(row, w, n)
-        dS = np.stack([np.bincount(row, grad[:, a], n) for a in range(dim)], axis=1)
-        S[~active] = 1.0
-        gws = (grad - (w / S[row])[:, None] * dS[row]) / S[row][:, None]
-        A = np.zeros((n, dim, dim))
-        np.add.at(A, row, np.einsum("pa,pb->pab", x_cols[j] - x_rows[row], gws))
-        Ainv = _inverse(A, active, counts, x_rows, gid_rows, "correction matrix A", what)
-        G = np.einsum("pba,pb->pa", Ainv[row], gws)
-        return np.ascontiguousarray(G), np.column_stack([S, dS]), w / S[row]
-    m = dim + 1
-    # the basis scaled by a length of the row (the support of its first particle) keeps M
-    # well conditioned at any size; the shape functions do not depend on it
-    scale = np.ones(n)
-    has = counts > 0
-    scale[has] = support[j[relation.ptr[:-1][has]]]
-    p = np.concatenate([np.ones((len(j), 1)), (x_cols[j] - x_rows[row]) / scale[row, None]], axis=1)
-    M = np.zeros((n, m, m))
-    np.add.at(M, row, w[:, None, None] * np.einsum("pa,pb->pab", p, p))
-    dM = np.zeros((n, dim, m, m))
-    np.add.at(dM, row, grad[:, :, None, None] * np.einsum("pa,pb->pab", p, p)[:, None])
-    Minv = _inverse(M, active, counts, x_rows, gid_rows, "moment matrix M", what)
-    data = np.concatenate([scale[:, None], Minv.reshape(n, m * m), dM.reshape(n, dim * m * m)], axis=1)
-    phi = np.einsum("pa,pa->p", Minv[row, 0], p) * w
-    return _mls_gradients(p, w, grad, data[row], dim), data, phi
+        code = kbm_trial(relation.ptr, relation.idx, x_rows, x_cols, support, kind, active, G, data,
+                                      phi, *scratch, report)
+    else:
+        code = mls_trial(relation.ptr, relation.idx, x_rows, x_cols, support, kind, active, G, data,
+                                      phi, *scratch, np.empty(m), np.empty((dim, m, m)), np.empty(m), report)
+    if code != kernel_shape.FINE:
+        q = int(report[0])
+        what = f"{_what(relation.rows)} {int(gid_rows[q])} at ({', '.join(f'{c:.6g}' for c in x_rows[q])})"
+        if code == kernel_shape.EMPTY:
+            raise InputError(f"{what} lies in no particle's kernel support; increase kernel.support")
+        matrix = "correction matrix A" if shape == "kbm" else "moment matrix M"
+        raise InputError(f"the {matrix} of {what} is singular or ill-conditioned (condition number {report[1]:.3g}, "
+                         f"{int(relation.ptr[q + 1] - relation.ptr[q])} particles in reach). Increase kernel.support")
+    return G, data, phi
 
 
-def _mls_gradients(p, w, grad, data, dim):
-    """d Phi_J(X_q) per pair from p_J = (1, (X_J - X_q) / l), W_J(X_q), grad W_J(X_q) and
-    the row data (l, M^-1, grad M) of its point q (see the module docstring)."""
-    m = dim + 1
-    scale = data[:, 0]
-    Minv = data[:, 1: 1 + m * m].reshape(-1, m, m)
-    dM = data[:, 1 + m * m:].reshape(-1, dim, m, m)
-    gamma = Minv[:, :, 0]
-    Mp = np.einsum("pab,pb->pa", Minv, p)
-    first = Mp[:, 1:] * (w / scale)[:, None]
-    second = np.einsum("pa,pkab,pb->pk", gamma, dM, Mp) * w[:, None]
-    third = np.einsum("pa,pa->p", gamma, p)[:, None] * grad
-    return np.ascontiguousarray(first - second + third)
-
-
-def test_function_gradients(shape, relation, x_rows, x_cols, data, support, kernel):
+def test_function_gradients(shape: str, relation: Relation, x_rows, x_cols, data, support, kernel: str):
     """grad N_I(X_q) per pair of `relation` from particles I to integration points q, from
     the row data of q (trial_gradients)."""
     dim = x_rows.shape[1]
-    row, q = relation.row_of_pair(), relation.idx
-    w, grad, sep = _kernel_pairs(relation, x_cols, x_rows, support, kernel, row, q)
-    if shape == "kbm":
-        S, dS = data[q, 0], data[q, 1:]
-        return np.ascontiguousarray((grad - (w / S)[:, None] * dS) / S[:, None])
-    p = np.concatenate([np.ones((len(q), 1)), -sep / data[q, :1]], axis=1)  # (1, (X_I - X_q) / l)
-    return _mls_gradients(p, w, grad, data[q], dim)
+    out = np.empty((len(relation.idx), dim))
+    kernel_shape.compile_shape(dim)[2](shape == "mls", relation.ptr, relation.idx, x_rows, x_cols, support,
+                                KERNEL_NAMES.index(kernel), data, out, np.empty(dim), np.empty(dim + 1),
+                                np.empty(dim + 1))
+    return out
 
 
 # ------------------------------------------------------------------ the formulation
@@ -212,20 +160,23 @@ class GalerkinFormulation:
         self.shape = "kbm" if self.type == "kbm" else "mls"
         self.points = integration_set(options)  # the other set, if any
         # the Eulerian kernel: the updated reference rebuilt at every step (as for sph, rlm)
-        self.updated = options.get("kernel") == "eulerian"
+        self.updated = self.eulerian = options.get("kernel") == "eulerian"
         self.update_every = 1 if self.updated else 0
-        self.kinematics_stress, self.forces = compile_stages(dim, law, self.updated)
+        self.kinematics_stress, self.forces = compile_stages(dim, law, self.eulerian)
         self.couplings = []
+        self.kept = {}  # the Eulerian kernel's relations kept between searches, by (set, trial or test)
 
     @property
     def pair_options(self) -> PairOptions:
         """The nodal pair data every particle has (nearest spacing for the time step, disorder)."""
         return PairOptions(corrected=True, hourglass_form=0, alpha=0.0)
 
-    def build(self, sim, body, kernel: str) -> None:
+    def build(self, sim, body, kernel: str, search: bool = True) -> None:
         """The relations and coefficients of `body` in the reference configuration: X (once,
-        Lagrangian kernel) or the updated reference X^r (Eulerian kernel, at every step); the
-        row data of the ghost integration points is copied from their owners."""
+        Lagrangian kernel) or the updated reference X^r (Eulerian kernel, at every step:
+        relations searched with the skin sim.skin and kept, or with `search` False picked
+        from the kept ones); the row data of the ghost integration points is copied from
+        their owners."""
         P = sim.particles.arrays
         n = sim.n_owned
         X, support, gid = P["Xr" if self.updated else "X"], P["support"], P["gid"]
@@ -240,18 +191,24 @@ class GalerkinFormulation:
             rows = len(A["gid"])
             active = (A["body"] == body.index) if name != "particles" else mine
             key = f"{self.shape}_data"
-            trial = find_relation(name, "particles", Y[: points.n_owned], X, gid, support, "cols",
-                                 np.where(active, 0, -1)[: points.n_owned], group_cols)
+
+            def related(label, *args):
+                if not self.updated:
+                    return find_relation(*args)
+                if search:
+                    self.kept[name, label] = KeptRelation(find_relation(*args, skin=sim.skin), args[6])
+                return self.kept[name, label].current(args[2], args[3], args[5])
+            trial = related("trial", name, "particles", Y[: points.n_owned], X, gid, support, "cols",
+                            np.where(active, 0, -1)[: points.n_owned], group_cols)
             G, data, phi = trial_gradients(self.shape, trial, Y[: points.n_owned], X, support, kernel, A["gid"],
-                                           active[: points.n_owned], "particle" if name == "particles" else
-                                           name[:-1].replace("_", " "))
+                                           active[: points.n_owned])
             if key not in A:
                 A[key] = np.zeros((rows,) + data.shape[1:])
             rows_of_body = np.flatnonzero(active[: points.n_owned])
             A[key][rows_of_body] = data[rows_of_body]
             points.refresh(key)
-            test = find_relation("particles", name, X[:n], Y, A["gid"], support, "rows", group_rows[:n],
-                                np.where(active, 0, -2))
+            test = related("test", "particles", name, X[:n], Y, A["gid"], support, "rows", group_rows[:n],
+                           np.where(active, 0, -2))
             if name == "particles":
                 base = np.arange(points.n_owned, dtype=np.int64)
             else:  # a point's first particle (rows of other bodies, never run, take any)
@@ -324,7 +281,7 @@ class GalerkinFormulation:
             ((prefix + "VP",) if prefix else ())
         return [Stage("kinematics+stress", displacement, writes=("d",))] * self.updated + [
             Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
-            Stage("forces", forces, reads=reads, writes=("f_int",))]
+            Stage("forces", forces, reads=reads, writes=("f_int",), force_row=True)]
 
     def quadrature(self, sim, body) -> list:
         """[(X, F, w)] of the body's owned integration points, set by set."""
@@ -360,21 +317,23 @@ class GalerkinFormulation:
 # ------------------------------------------------------------------ compiled stages
 
 
-def compile_stages(dim: int, law: int, updated: bool = False):
+def compile_stages(dim: int, law: int, eulerian: bool = False):
     """(kinematics_stress, forces) for one body's dimension, material law and reference
-    (the initial one, or the updated one of the Eulerian kernel)."""
+    (the initial one, or the current one of the Eulerian kernel)."""
+    reference = tlsph.REFERENCE_CURRENT if eulerian else tlsph.REFERENCE_INITIAL
     @njit(cache=True, _nrt=False)
     def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi, P, work):
         """F = I + sum_J (d_J - d_base) (x) G_J, the stress, w P, J and psi at integration
-        points lo..hi-1; returns the first inverted point or -1. With an updated reference
-        (Eulerian kernel) that gradient is the motion fs from the reference, F = fs F^r, and
-        the forces take V^0 P F^rT = V^r P^r [V eq. 14]; in the total-Lagrangian case fs and
-        F are one array. P (dim x dim) and work (update.WORK x 3 x 3): scratch."""
+        points lo..hi-1; returns the first inverted point or -1. With the Eulerian kernel
+        that gradient is the motion fs from the last reference, F = fs F^r, and the forces,
+        which use the reference moved to the current configuration, take w P F^T
+        (formulations.tlsph.stress_at); in the total-Lagrangian case fs and F are one array.
+        P (dim x dim) and work (update.WORK x 3 x 3): scratch."""
         undamaged = state[:, :0]  # damage is computed at particles only (config)
         first_bad = -1
         for q in range(lo, hi):
             gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-            bad = stress_at(dim, law, updated, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
+            bad = stress_at(dim, law, reference, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
                             work, F, VP, J, psi)
             if bad and first_bad < 0:
                 first_bad = q
@@ -393,5 +352,5 @@ def compile_stages(dim: int, law: int, updated: bool = False):
                         s += VP[q, a, b] * g[p, b]
                     f_int[i, a] -= s
 
-    variant = f"{COMPILED_SOURCE} {dim} {law} {updated}"
+    variant = f"{COMPILED_SOURCE} {dim} {law} {eulerian}"
     return CompiledOnce(kinematics_stress, variant), CompiledOnce(forces, variant)

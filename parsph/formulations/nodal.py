@@ -60,8 +60,10 @@ class NodalFormulation:
         self.update_every, self.update_strain = (1, 0.0) if self.eulerian else \
             (options["update_every"], options["update_strain"])
         force = "rlm" if self.type == "rlm" else options["force_form"]
+        reference = tlsph.REFERENCE_CURRENT if self.eulerian else \
+            tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
-            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, self.updated, self.eta > 0, damaged)
+            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, damaged)
 
     @property
     def pair_options(self) -> PairOptions:
@@ -131,7 +133,7 @@ class NodalFormulation:
             def hessian_transpose():
                 ref = sim.ref
                 self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.VP, sim.B)
-            out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",)))
+            out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",), force_row=True))
 
         def forces():
             ref = sim.ref
@@ -141,7 +143,7 @@ class NodalFormulation:
                         *force_scratch)
         reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
-                         writes=("f_int", "f_hg", "omega_hg2")))
+                         writes=("f_int", "f_hg", "omega_hg2"), force_row=True))
         if any(self.viscosity):
             def viscosity():
                 ref = sim.ref
@@ -149,6 +151,6 @@ class NodalFormulation:
                     body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.d, sim.v, sim.J,
                     body.density, sim.volume_r if self.updated else sim.volume, sim.mass, sim.support,
                     body.constants.wave_speed, *self.viscosity, sim.f_visc)
-            out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc",)))
+            out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc",), force_row=True))
         return out
 

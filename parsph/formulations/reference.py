@@ -23,9 +23,9 @@ import numpy as np
 
 from parsph.errors import ParsphError
 from parsph.formulations import tlsph
-from parsph.kernels.correction import reference_pairs, reverse_index, reverse_values
+from parsph.kernels.correction import KeptPairs, reference_pairs, reverse_values
 from parsph.kernels.hessian import corrected_hessians
-from parsph.neighbors import find_pairs, from_candidates, within_bodies, without
+from parsph.neighbors import find_pairs, within_bodies, without
 
 
 @dataclass
@@ -48,8 +48,7 @@ class ReferenceData:
     gh_rev: np.ndarray
     min_spacing: np.ndarray  # nearest reference neighbour distance of each owned particle
     stiffening: np.ndarray  # how much the stabilisation stiffens each owned particle (>= 1)
-    candidates: object  # neighbour lists with a skin (neighbors.Pairs, rows 0..n_rows-1), kept between searches
-    candidate_rev: np.ndarray | None  # their reverse_index
+    kept: KeptPairs | None  # an Eulerian kernel's lists with a skin, kept between searches
     bad: np.ndarray  # owned rows whose correction matrix is singular (with `tolerant`)
 
 
@@ -65,8 +64,9 @@ class PairOptions:
 
 
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str, body: np.ndarray,
-          options: list, eta: float, weighted_hessian: bool, skin: float = 0.0, candidates=None,
-          candidate_rev=None, detached: np.ndarray | None = None, cut: np.ndarray | None = None,
+          options: list, eta: float, weighted_hessian: bool, skin: float | None = None,
+          kept: KeptPairs | None = None,
+          detached: np.ndarray | None = None, cut: np.ndarray | None = None,
           tolerant: bool = False) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
     and layer-1 ghosts) are built to provide the reverse coefficients g_ji. `body` is each
@@ -74,27 +74,23 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
     failed particles whose pairs are broken, materials.damage) of any, nor the pairs `cut`
     (neighbors.crossing: across a crack). The neighbours are
-    searched for (with lists `skin` beyond the support, kept as `candidates` with their
-    reverse index `candidate_rev`), or picked from the candidates of an earlier search: the
-    same pairs in the same order. `tolerant`: owned rows left with a singular correction
-    matrix are listed in `bad` rather than raised."""
-    rev = None
-    if candidates is None:
-        candidates = find_pairs(X, support, gid, n_rows, skin)
-        if len(options) > 1:
-            candidates = within_bodies(candidates, body)
-        if detached is not None and detached.any():
-            candidates = without(candidates, detached, gid, np.zeros(0, np.int64) if cut is None else cut)
-        candidate_rev = reverse_index(candidates) if skin > 0 else None
-    if candidate_rev is None:
-        pairs = candidates
-    else:  # the neighbours among the candidates, and their reverse pairs through the candidates'
-        pairs, keep = from_candidates(candidates, X, support)
-        renumber = np.cumsum(keep) - 1
-        rev = np.where(candidate_rev[keep] >= 0, renumber[np.maximum(candidate_rev[keep], 0)], -1)
+    searched for, or, given a `skin` (an Eulerian kernel: one body, no stabilisation), picked
+    by KeptPairs from lists that much wider, searched for once and then `kept` until a
+    particle has moved half the skin: the same pairs in the same order. `tolerant`: owned rows left
+    with a singular correction matrix are listed in `bad` rather than raised."""
     corrected = np.array([o.corrected for o in options])
+    if skin is not None or kept is not None:
+        if kept is None:
+            candidates = find_pairs(X, support, gid, n_rows, skin)
+            kept = KeptPairs(candidates, X.shape[1], kernel)
+        return _rebuilt(kept, X, measure, support, gid, n_owned, ~corrected[body[:n_rows]])
+    pairs = find_pairs(X, support, gid, n_rows)
+    if len(options) > 1:
+        pairs = within_bodies(pairs, body)
+    if detached is not None and detached.any():
+        pairs = without(pairs, detached, gid, np.zeros(0, np.int64) if cut is None else cut)
     ref = reference_pairs(X, measure, support, gid, pairs, kernel,
-                          None if corrected.all() else corrected[body[:n_rows]], rev,
+                          None if corrected.all() else corrected[body[:n_rows]],
                           None if detached is None else detached[:n_rows], tolerant)
     n = n_owned
     end = int(pairs.ptr[n])
@@ -143,5 +139,18 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), w=np.ascontiguousarray(ref.w[:end]),
         g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
         g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, hreg=hreg, q=q, q_rev=q_rev, q_sum=q_sum,
-        gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, candidates=candidates,
-        candidate_rev=candidate_rev, bad=ref.bad[ref.bad < n])
+        gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
+
+
+def _rebuilt(kept: KeptPairs, X, measure, support, gid, n: int, plain: np.ndarray) -> ReferenceData:
+    """The reference data of an Eulerian kernel, from its kept lists (views of their
+    arrays, rebuilt in place at the next step)."""
+    min_spacing = np.empty(n)
+    end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing)
+    dim = X.shape[1]
+    none = np.zeros(0)
+    return ReferenceData(
+        ptr=kept.ptr[: n + 1], idx=kept.idx[:end], dx=kept.dx[:end], w=kept.w[:end], g=kept.g[:end],
+        g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=none, hreg=none, q=np.zeros((0, dim)),
+        q_rev=np.zeros((0, dim)), q_sum=np.zeros((0, dim)), gh=none, gh_rev=none, min_spacing=min_spacing,
+        stiffening=np.ones(n), kept=kept, bad=np.zeros(0, np.int64))

@@ -10,7 +10,9 @@ Stage 1, `kinematics_stress`: for each owned particle
     f_i^s = f_i + eta sum_j [(d_j - d_i) (x) Hc_ij h - (f_j - f_i) (g_ij . h)]
     (f of the neighbours comes from the extra pass `gradient` and a halo refresh)
     F_i = f_i^s F^r_i,  P_i = P(F_i), psi_i                   (materials.update)
-and the stored product VP_i = V^0_i P_i F^rT_i [V eq. 14] that stage 2 reads.
+and the stored product VP_i = V^0_i P_i F^rT_i [V eq. 14] that stage 2 reads; with an
+Eulerian kernel, whose reference moves to the current configuration between the stages,
+VP_i = V^0_i P_i F_i^T = V_i sigma_i, the same product in the new reference.
 
 Stage 2, `forces`: the internal force in one of two forms,
     pair form [G eq. 24]:   f_i = sum_j (V_i P_i g_ij - V_j P_j g_ji)
@@ -60,6 +62,9 @@ from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
+# the reference of F: the initial configuration, an updated one [V §3.1], or the current
+# one (an Eulerian kernel [R eq. 16]: VP is formed for the reference the forces will use)
+REFERENCE_INITIAL, REFERENCE_UPDATED, REFERENCE_CURRENT = 0, 1, 2
 # force rows: [G eq. 24] pair form, [V eq. 11] virtual work, and RLM [R Table 1]
 FORCE_PAIR, FORCE_VIRTUAL_WORK, FORCE_RLM = 0, 1, 2
 FORCE_FORMS = {"pair": FORCE_PAIR, "virtual_work": FORCE_VIRTUAL_WORK, "rlm": FORCE_RLM}
@@ -71,11 +76,11 @@ VARIATIONAL_SCALE = 0.2
 
 
 @functools.lru_cache(maxsize=None)
-def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated: bool = False,
+def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
                    hessian: bool = False, damaged: bool = False):
     """(gradient, kinematics_stress, hessian_transpose, forces) for one body's switches:
-    dimension, material law (materials.update), force row, hourglass form, updated
-    reference, Hessian stabilisation, tensile damage (materials.damage: only the stages of a
+    dimension, material law (materials.update), force row, hourglass form, reference
+    (REFERENCE_*), Hessian stabilisation, tensile damage (materials.damage: only the stages of a
     damaged body compile it). Each stage works on the owned rows lo..hi-1.
 
     The switches are closure constants, so branches on them are folded away by the
@@ -112,7 +117,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
                             fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
             else:
                 gradient_row(dim, i, i, ptr, idx, g, d, fs)
-            if stress_at(dim, law, updated, damaged, i, fs, Fr, volume[i], c, state, trial, damage_state,
+            if stress_at(dim, law, reference, damaged, i, fs, Fr, volume[i], c, state, trial, damage_state,
                          damage_trial, P, work, F, VP, J, psi) and first_bad < 0:
                 first_bad = i
             if hourglass == HOURGLASS_VARIATIONAL:
@@ -241,7 +246,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, updated:
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
-    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {updated} {hessian} {damaged}"
+    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {reference} {hessian} {damaged}"
     return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
 
 
@@ -260,14 +265,15 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def stress_at(dim, law, updated, with_damage, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F, VP,
-              J, psi):
+def stress_at(dim, law, reference, with_damage, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F,
+              VP, J, psi):
     """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
-    updated reference [V §3.1], the material update (new state in trial[i]), its damage
+    updated or current reference, the material update (new state in trial[i]), its damage
     (materials.damage, if with_damage), J, psi and VP[i] = w P, or w P F^rT =
-    V^r P^r [V eq. 14]. Returns whether the point is inverted or its stress not finite
+    V^r P^r [V eq. 14] (updated), or w P F^T (current: the reference the forces use is
+    the configuration F maps to). Returns whether the point is inverted or its stress not finite
     (never for a failed point, which carries no stress)."""
-    if updated:
+    if reference != REFERENCE_INITIAL:
         for a in range(dim):
             for b in range(dim):
                 s = 0.0
@@ -287,10 +293,15 @@ def stress_at(dim, law, updated, with_damage, i, fs, Fr, w, c, state, trial, dam
     psi[i] = e
     for a in range(dim):
         for b in range(dim):
-            if updated:
+            if reference == REFERENCE_UPDATED:
                 s = 0.0
                 for k in range(dim):
                     s += P[a, k] * Fr[i, b, k]
+                VP[i, a, b] = w * s
+            elif reference == REFERENCE_CURRENT:
+                s = 0.0
+                for k in range(dim):
+                    s += P[a, k] * F[i, b, k]
                 VP[i, a, b] = w * s
             else:
                 VP[i, a, b] = w * P[a, b]

@@ -13,6 +13,7 @@ global id and position instead of being turned into NaNs.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -20,8 +21,8 @@ import numpy as np
 from numba import njit
 
 from parsph.errors import InputError
-from parsph.kernels.functions import evaluate
-from parsph.materials.elastic import symmetric_extremes
+from parsph.kernels.functions import KERNEL_NAMES, evaluate, value_and_slope
+from parsph.materials.elastic import inverse, symmetric_extremes
 from parsph.neighbors import Pairs
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
@@ -138,13 +139,13 @@ def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
 
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
-    pairs: Pairs, kernel: str, corrected: np.ndarray | None = None, rev: np.ndarray | None = None,
+    pairs: Pairs, kernel: str, corrected: np.ndarray | None = None,
     detached: np.ndarray | None = None, tolerant: bool = False,
 ) -> ReferencePairs:
     """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
     with `corrected` False get the plain SPH gradient g_ij = -V_j w_ij = V_j grad_i W_ij
     (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i; so do the rows
-    of `detached` particles (no pairs). `rev`: the pairs' reverse_index, if known.
+    of `detached` particles (no pairs).
     `tolerant`: singular or ill-conditioned rows are listed in `bad` (with L_i^-1 = -I)
     instead of raising."""
     dim = positions.shape[1]
@@ -190,7 +191,191 @@ def reference_pairs(
     g = np.empty_like(dx)
     g_sum = np.empty((rows, dim))
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
-    rev = reverse_index(pairs) if rev is None else rev
+    rev = reverse_index(pairs)
     g_rev = reverse_values(g, rev)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
                           rev=rev, bad=np.flatnonzero(bad))
+
+
+class KeptPairs:
+    """The per-pair reference data of an Eulerian kernel, rebuilt at every step from lists
+    kept between searches (candidates found with a skin) by compiled passes (`rebuild`)
+    into arrays allocated once per search: the pairs of the owned rows closer than the
+    mean of their supports (as neighbors.find_pairs would find them now, in the same
+    order), kernel values and corrected gradients with c_ij = V_j (dW/dr / r) and the
+    inverse of L_i in closed form, the reverse gradients g_ji from L_j^-1 (the rows of the
+    ghosts are summed for L only), and the nearest neighbour distance."""
+
+    def __init__(self, candidates: Pairs, dim: int, kernel: str):
+        self.candidates = candidates
+        size, rows = len(candidates.idx), candidates.rows
+        self.kind = KERNEL_NAMES.index(kernel)
+        self.ptr = np.zeros(rows + 1, np.int64)
+        self.idx = np.empty(size, np.int64)
+        self.dx, self.g, self.g_rev = (np.empty((size, dim)) for _ in range(3))
+        self.w, self.slope = np.empty(size), np.empty(size)
+        self.g_sum = np.empty((rows, dim))
+        self.Linv = np.empty((rows, dim, dim))
+        self.report = np.zeros(3)
+        self.scratch = (np.empty((dim, dim)), np.empty((3, 3)))
+
+    def rebuild(self, positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
+                plain: np.ndarray, n_owned: int, min_spacing: np.ndarray) -> int:
+        """Rebuild at `positions` (rows with `plain` take the plain SPH gradient, as in
+        reference_pairs); the nearest neighbour distance of the owned rows into
+        `min_spacing`. Returns the number of pairs of the owned rows; raises InputError on a
+        position that is not a number, coinciding particles or a singular L_i."""
+        cand = self.candidates
+        kept_rows, kept_gradients = _compile_kept(positions.shape[1])
+        code = kept_rows(cand.ptr, cand.idx, positions, volume, support, self.kind, plain, n_owned, self.ptr,
+                          self.idx, self.dx, self.w, self.slope, self.Linv, min_spacing, *self.scratch, self.report)
+        if code == _FINE:
+            kept_gradients(n_owned, self.ptr, self.idx, self.dx, self.slope, volume, self.Linv, self.g, self.g_rev,
+                            self.g_sum)
+            return int(self.ptr[n_owned])
+        a, b, value = int(self.report[0]), int(self.report[1]), self.report[2]
+        if code == _NOT_A_NUMBER:
+            raise InputError(f"particles {int(gid[a])} and {int(gid[b])} have no finite distance "
+                             "(a position is not a number)")
+        where = ", ".join(f"{c:.6g}" for c in positions[a])
+        if code == _COINCIDE:
+            raise InputError(f"particles {int(gid[a])} and {int(gid[b])} coincide at ({where})")
+        raise InputError(
+            f"correction matrix L of particle {int(gid[a])} at ({where}) is singular or ill-conditioned "
+            f"(condition number {value:.3g}); {b} particle(s) affected. Increase kernel.support or "
+            "kernel.neighbours, or check for isolated or collinear particles.")
+
+
+_FINE, _NOT_A_NUMBER, _COINCIDE, _SINGULAR = 0, 1, 2, 3
+
+
+@functools.lru_cache(maxsize=None)
+def _compile_kept(dim: int) -> tuple:
+    """(_kept_rows, _kept_gradients) compiled for dimension `dim` (a constant of the
+    machine code: its branches on it are folded away)."""
+    @njit(cache=True, _nrt=False)
+    def _kept_rows(cptr, cidx, X, volume, support, kind, plain, n_owned, ptr, idx, dx, w, slope, Linv, min_spacing,
+                   L, M, report):
+        """KeptPairs.rebuild, first pass, row by row: the kept candidates (stored for the owned
+        rows) with their kernel values and L_i, its condition number and inverse.
+        report: (row, neighbour or count of singular rows, condition). The sums of a row run in
+        scalars (L is symmetric): stores to arrays that might alias would keep the compiler
+        from holding them in registers."""
+        k = 0
+        first_bad, bad = -1, 0
+        for i in range(len(cptr) - 1):
+            owned = i < n_owned
+            l00 = l01 = l02 = l11 = l12 = l22 = 0.0
+            nearest = np.inf
+            count = 0
+            for p in range(cptr[i], cptr[i + 1]):
+                j = cidx[p]
+                e0 = X[j, 0] - X[i, 0]
+                e1 = X[j, 1] - X[i, 1] if dim > 1 else 0.0
+                e2 = X[j, 2] - X[i, 2] if dim > 2 else 0.0
+                r = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                h = 0.5 * (support[i] + support[j])
+                if not r < h:
+                    if not math.isfinite(r):
+                        report[0], report[1] = i, j
+                        return _NOT_A_NUMBER
+                    continue
+                if not r > 0.0:
+                    report[0], report[1] = i, j
+                    return _COINCIDE
+                value, dw = value_and_slope(kind, r, h, dim)
+                s = dw / r
+                c = volume[j] * s
+                l00 += c * e0 * e0
+                l01 += c * e0 * e1
+                l02 += c * e0 * e2
+                l11 += c * e1 * e1
+                l12 += c * e1 * e2
+                l22 += c * e2 * e2
+                count += 1
+                if owned:
+                    idx[k] = j
+                    dx[k, 0] = e0
+                    if dim > 1:
+                        dx[k, 1] = e1
+                    if dim > 2:
+                        dx[k, 2] = e2
+                    w[k] = value
+                    slope[k] = s
+                    nearest = min(nearest, r)
+                    k += 1
+            if owned:
+                ptr[i + 1] = k
+                min_spacing[i] = nearest
+            if plain[i]:
+                for a in range(dim):
+                    for b in range(dim):
+                        Linv[i, a, b] = -1.0 if a == b else 0.0
+                continue
+            L[0, 0] = l00
+            if dim > 1:
+                L[0, 1] = L[1, 0] = l01
+                L[1, 1] = l11
+            if dim > 2:
+                L[0, 2] = L[2, 0] = l02
+                L[1, 2] = L[2, 1] = l12
+                L[2, 2] = l22
+            cond = np.inf
+            if count:
+                for a in range(dim):
+                    for b in range(dim):
+                        t = 0.0
+                        for m in range(dim):
+                            t += L[m, a] * L[m, b]
+                        M[a, b] = t
+                small, large = symmetric_extremes(M, dim)
+                if small > 0.0:
+                    cond = math.sqrt(large / small)
+            if not cond < MAX_CONDITION:
+                if first_bad < 0:
+                    first_bad, report[2] = i, cond
+                bad += 1
+                continue
+            inverse(L, dim, Linv[i])
+        if first_bad >= 0:
+            report[0], report[1] = first_bad, bad
+            return _SINGULAR
+        return _FINE
+
+
+    @njit(cache=True, _nrt=False)
+    def _kept_gradients(n_owned, ptr, idx, dx, slope, volume, Linv, g, g_rev, g_sum):
+        """KeptPairs.rebuild, second pass over the owned rows: g_ij = V_j s_ij L_i^-1 X_ij and
+        g_ji = V_i s_ij L_j^-1 X_ji (s = dW/dr / r), the same numbers as row j computes, and
+        the row sums of g."""
+        for i in range(n_owned):
+            s0 = s1 = s2 = 0.0
+            for q in range(ptr[i], ptr[i + 1]):
+                j = idx[q]
+                e0 = dx[q, 0]
+                e1 = dx[q, 1] if dim > 1 else 0.0
+                e2 = dx[q, 2] if dim > 2 else 0.0
+                c, b = volume[j] * slope[q], volume[i] * slope[q]
+                for a in range(dim):
+                    t = Linv[i, a, 0] * e0
+                    u = Linv[j, a, 0] * -e0
+                    if dim > 1:
+                        t += Linv[i, a, 1] * e1
+                        u += Linv[j, a, 1] * -e1
+                    if dim > 2:
+                        t += Linv[i, a, 2] * e2
+                        u += Linv[j, a, 2] * -e2
+                    g[q, a] = c * t
+                    g_rev[q, a] = b * u
+                s0 += g[q, 0]
+                if dim > 1:
+                    s1 += g[q, 1]
+                if dim > 2:
+                    s2 += g[q, 2]
+            g_sum[i, 0] = s0
+            if dim > 1:
+                g_sum[i, 1] = s1
+            if dim > 2:
+                g_sum[i, 2] = s2
+
+    return _kept_rows, _kept_gradients
