@@ -11,6 +11,7 @@ moved half the skin.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,18 +48,57 @@ def find_pairs(positions: np.ndarray, support: np.ndarray, gid: np.ndarray, rows
     if n == 0 or rows == 0:
         return Pairs(np.zeros(rows + 1, np.int64), np.zeros(0, np.int64))
     i, j = close_pairs(positions, float(support.max()) + skin)
-    sep = positions[j] - positions[i]
-    dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
-    keep = dist < 0.5 * (support[i] + support[j]) + skin
-    i, j = i[keep], j[keep]
-    i, j = np.concatenate([i, j]), np.concatenate([j, i])
-    mine = i < rows
-    i, j = i[mine], j[mine]
-    order = np.lexsort((gid[j], i))
-    i, j = i[order], j[order]
     ptr = np.zeros(rows + 1, np.int64)
-    np.cumsum(np.bincount(i, minlength=rows), out=ptr[1:])
-    return Pairs(ptr, j)
+    _row_counts(i, j, positions, support, skin, rows, ptr)
+    np.cumsum(ptr, out=ptr)
+    idx = np.empty(ptr[-1], np.int64)
+    _fill_rows(i, j, positions, support, gid, skin, ptr, ptr[:-1].copy(), idx)
+    return Pairs(ptr, idx)
+
+
+@njit(cache=True, inline="always")
+def _close(i, j, positions, support, skin):
+    """|x_j - x_i| < (h_i + h_j) / 2 + skin."""
+    s = 0.0
+    for a in range(positions.shape[1]):
+        e = positions[j, a] - positions[i, a]
+        s += e * e
+    return math.sqrt(s) < 0.5 * (support[i] + support[j]) + skin
+
+
+@njit(cache=True, _nrt=False)
+def _row_counts(i, j, positions, support, skin, rows, counts):
+    """counts[1 + r] += 1 for each end r < rows of a close pair (i, j)."""
+    for p in range(len(i)):
+        if _close(i[p], j[p], positions, support, skin):
+            if i[p] < rows:
+                counts[1 + i[p]] += 1
+            if j[p] < rows:
+                counts[1 + j[p]] += 1
+
+
+@njit(cache=True, _nrt=False)
+def _fill_rows(i, j, positions, support, gid, skin, ptr, at, idx):
+    """The close pairs into the rows of the CSR (ptr; at: each row's next slot), then each
+    row sorted by the neighbours' global ids (insertion sort: rows are short)."""
+    rows = len(ptr) - 1
+    for p in range(len(i)):
+        if _close(i[p], j[p], positions, support, skin):
+            if i[p] < rows:
+                idx[at[i[p]]] = j[p]
+                at[i[p]] += 1
+            if j[p] < rows:
+                idx[at[j[p]]] = i[p]
+                at[j[p]] += 1
+    for r in range(rows):
+        for p in range(ptr[r] + 1, ptr[r + 1]):
+            k = idx[p]
+            key = gid[k]
+            q = p - 1
+            while q >= ptr[r] and gid[idx[q]] > key:
+                idx[q + 1] = idx[q]
+                q -= 1
+            idx[q + 1] = k
 
 
 def kdtree(points: np.ndarray):
@@ -97,64 +137,86 @@ def close_pairs(x: np.ndarray, r: float, group: np.ndarray | None = None, allowe
     r2 = r * r * (1.0 + 1e-9)
     counts = np.zeros(len(x), np.int64)
     empty = np.zeros(0, np.int64)
-    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, counts, empty, empty)
+    _cell_pairs(x, r2, cells, order, sorted_keys, first, group, allowed, counts, empty, empty)
     start = np.zeros(len(x) + 1, np.int64)
     np.cumsum(counts, out=start[1:])
     i, j = np.empty(start[-1], np.int64), np.empty(start[-1], np.int64)
-    _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, start, i, j)
+    _cell_pairs(x, r2, cells, order, sorted_keys, first, group, allowed, start, i, j)
     return i, j
 
 
 @njit(cache=True)
-def _cell_pairs(x, r2, cells, key, order, sorted_keys, first, group, allowed, where, i_out, j_out):
-    """For each point p, the points q > p in its cell and the adjacent ones with
-    |x_q - x_p|^2 <= r2 (and, if `group` is not empty, allowed[group[p], group[q]]):
-    counted into where[p] (i_out empty), or written from where[p]. `first`: each cell's
-    first position in `order` (all cells, and one past), or empty (then found by
-    bisection of sorted_keys)."""
+def _cell_pairs(x, r2, cells, order, sorted_keys, first, group, allowed, where, i_out, j_out):
+    """Cell by cell (the points of a cell are order[s:e]), the pairs of its points with
+    each other and with the points of the cells ahead of it in a half stencil (the
+    neighbour cells whose offset's first non-zero component is +1: each pair of adjacent
+    cells once) with |x_q - x_p|^2 <= r2 (and, if `group` is not empty, allowed[group[p],
+    group[q]]), as (min, max): counted into where[s] (i_out empty), or written from
+    where[s]. `first`: each cell's first position in `order` (all cells, and one past), or
+    empty (then found by bisection of sorted_keys)."""
     n, dim = x.shape
     fill = len(i_out) > 0
     stride = np.ones(dim, np.int64)
     for a in range(dim - 2, -1, -1):
         stride[a] = stride[a + 1] * cells[a + 1]
+    ahead = np.zeros(((3 ** dim - 1) // 2, dim), np.int64)
+    count = 0
+    for shift in range(3 ** dim):
+        t, lead = shift, 0
+        for a in range(dim):
+            ahead[count, a] = t % 3 - 1
+            t //= 3
+            if lead == 0:
+                lead = ahead[count, a]
+        if lead > 0:
+            count += 1
     cell = np.empty(dim, np.int64)
-    for s in range(n):  # in cell order: neighbouring points are near in memory
-        p = order[s]
-        rest = key[p]
+    s = 0
+    while s < n:
+        code = sorted_keys[s]
+        e = s + 1
+        while e < n and sorted_keys[e] == code:
+            e += 1
+        rest = code
         for a in range(dim - 1, -1, -1):
             cell[a] = rest % cells[a]
             rest //= cells[a]
-        k = where[p] if fill else 0
-        for shift in range(3 ** dim):  # the 3^d cells around
-            code, t, inside = 0, shift, True
-            for a in range(dim):
-                c = cell[a] + t % 3 - 1
-                t //= 3
-                if c < 0 or c >= cells[a]:
-                    inside = False
-                    break
-                code += c * stride[a]
-            if not inside:
-                continue
-            if len(first):
-                m, end = first[code], first[code + 1]
+        k = where[s] if fill else 0
+        for o in range(-1, len(ahead)):  # the cell itself, then the cells ahead
+            if o < 0:
+                m, end = s, e
             else:
-                m = np.searchsorted(sorted_keys, code)
-                end = np.searchsorted(sorted_keys, code + 1)
-            for m in range(m, end):
-                q = order[m]
-                if q <= p or (len(group) and not allowed[group[p], group[q]]):
-                    continue
-                d2 = 0.0
+                other, inside = code, True
                 for a in range(dim):
-                    e = x[q, a] - x[p, a]
-                    d2 += e * e
-                if d2 <= r2:
-                    if fill:
-                        i_out[k], j_out[k] = p, q
-                    k += 1
+                    c = cell[a] + ahead[o, a]
+                    if c < 0 or c >= cells[a]:
+                        inside = False
+                        break
+                    other += ahead[o, a] * stride[a]
+                if not inside:
+                    continue
+                if len(first):
+                    m, end = first[other], first[other + 1]
+                else:
+                    m = np.searchsorted(sorted_keys, other)
+                    end = np.searchsorted(sorted_keys, other + 1)
+            for u in range(s, e):
+                p = order[u]
+                for v in range(u + 1 if o < 0 else m, end):
+                    q = order[v]
+                    if len(group) and not allowed[group[p], group[q]]:
+                        continue
+                    d2 = 0.0
+                    for a in range(dim):
+                        t = x[q, a] - x[p, a]
+                        d2 += t * t
+                    if d2 <= r2:
+                        if fill:
+                            i_out[k], j_out[k] = min(p, q), max(p, q)
+                        k += 1
         if not fill:
-            where[p] = k
+            where[s] = k
+        s = e
 
 
 def within_bodies(pairs: Pairs, body: np.ndarray) -> Pairs:

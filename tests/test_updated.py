@@ -320,3 +320,46 @@ def test_bad_update_and_wall_settings_are_refused(extra, message):
         text += "\n" + extra + "\n"
     with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):
         simulation(text)
+
+
+@pytest.mark.parametrize("eta", [0.0, 0.7])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_compiled_reference_of_an_updated_body_matches_the_total_lagrangian_build(dim, eta):
+    """The per-pair data of an updated reference (formulations.reference with a skin:
+    kernels.correction.KeptPairs, compiled, L^-1 in closed form, g_ji from L_j^-1, the
+    Hessians' row sums only) against the build of a total-Lagrangian body (numpy, LAPACK's
+    inverse, full corrected Hessians) on a disordered block whose last fifth of rows are
+    ghosts (rows without reference data of their own): the same pairs in the same order,
+    and every coefficient to round-off."""
+    from parsph.formulations import reference, tlsph
+
+    spacing = 0.05 if dim == 2 else 0.1
+    X, measure = box([0.0] * dim, [1.0] * dim, spacing)
+    rng = np.random.default_rng(3)
+    X = X + rng.uniform(-0.2, 0.2, X.shape) * spacing
+    order = rng.permutation(len(X))
+    X, measure = X[order], measure[order]
+    gid = rng.permutation(len(X)).astype(np.int64)
+    support = 2.1 * spacing * (1.0 + 0.1 * rng.random(len(X)))
+    volume = measure * 1.1
+    n_rows = len(X)
+    n = int(0.8 * n_rows)
+    body = np.zeros(len(X), np.int64)
+    options = [reference.PairOptions(corrected=True, hourglass_form=tlsph.HOURGLASS_PAPER, alpha=50.0,
+                                     stabilised=eta > 0)]
+    args = (X, measure, volume, support, gid, n, n_rows, "cubic_spline", body, options, eta, True)
+    numpy_build, compiled = reference.build(*args), reference.build(*args, skin=0.0)
+    assert compiled.kept is not None and numpy_build.kept is None
+    assert np.array_equal(numpy_build.ptr, compiled.ptr) and np.array_equal(numpy_build.idx, compiled.idx)
+    for name in ("dx", "w", "g", "g_rev", "g_sum", "hgc", "hreg", "q", "q_rev", "q_sum", "gh", "gh_rev",
+                 "min_spacing", "stiffening"):
+        a, b = getattr(numpy_build, name), getattr(compiled, name)
+        assert a.shape == b.shape, name
+        scale = np.abs(a).max() if a.size else 0.0
+        assert np.abs(a - b).max(initial=0.0) <= 1e-11 * scale, name
+    assert len(compiled.q) == (len(compiled.idx) if eta > 0 else 0)
+    # the corrected gradients reproduce linear fields: sum_j X_ij (x) g_ij = I
+    rows = np.repeat(np.arange(n), np.diff(compiled.ptr))
+    M = np.zeros((n, dim, dim))
+    np.add.at(M, rows, np.einsum("pa,pb->pab", compiled.dx, compiled.g))
+    assert np.abs(M - np.eye(dim)).max() < 1e-12

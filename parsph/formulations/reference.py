@@ -74,16 +74,16 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
     failed particles whose pairs are broken, materials.damage) of any, nor the pairs `cut`
     (neighbors.crossing: across a crack). The neighbours are
-    searched for, or, given a `skin` (an Eulerian kernel: one body, no stabilisation), picked
-    by KeptPairs from lists that much wider, searched for once and then `kept` until a
-    particle has moved half the skin: the same pairs in the same order. `tolerant`: owned rows left
+    searched for, or, given a `skin` (an updated reference: one body, no pair breaking),
+    built by KeptPairs, which an Eulerian kernel keeps (`kept`, lists that much wider)
+    until a particle has moved half the skin: the same pairs in the same order. `tolerant`: owned rows left
     with a singular correction matrix are listed in `bad` rather than raised."""
     corrected = np.array([o.corrected for o in options])
     if skin is not None or kept is not None:
         if kept is None:
-            candidates = find_pairs(X, support, gid, n_rows, skin)
-            kept = KeptPairs(candidates, X.shape[1], kernel)
-        return _rebuilt(kept, X, measure, support, gid, n_owned, ~corrected[body[:n_rows]])
+            kept = KeptPairs(find_pairs(X, support, gid, n_rows, skin), X.shape[1], kernel,
+                             (eta, weighted_hessian) if eta > 0 else None)
+        return _rebuilt(kept, X, measure, volume, support, gid, n_owned, body, options)
     pairs = find_pairs(X, support, gid, n_rows)
     if len(options) > 1:
         pairs = within_bodies(pairs, body)
@@ -142,15 +142,27 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
 
 
-def _rebuilt(kept: KeptPairs, X, measure, support, gid, n: int, plain: np.ndarray) -> ReferenceData:
-    """The reference data of an Eulerian kernel, from its kept lists (views of their
-    arrays, rebuilt in place at the next step)."""
-    min_spacing = np.empty(n)
-    end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing)
+def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np.ndarray,
+             options: list) -> ReferenceData:
+    """The reference data of an updated reference (one body) from its KeptPairs (views of
+    their arrays, rebuilt in place at the next step of an Eulerian kernel)."""
+    rows = kept.candidates.rows
+    plain = np.full(rows, not options[0].corrected)
+    min_spacing, stiffening = np.empty(n), np.ones(n)
+    end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening)
     dim = X.shape[1]
-    none = np.zeros(0)
+    ptr, idx, dx, w = kept.ptr[: n + 1], kept.idx[:end], kept.dx[:end], kept.w[:end]
+    hgc = hreg = np.zeros(0)
+    form = options[0].hourglass_form
+    if form:
+        hgc, hreg = np.zeros(end), np.zeros(end)
+        tlsph.hourglass_coefficients(form, ptr, idx, dx, w, kept.h[:end], volume, measure, float(options[0].alpha),
+                                     body[:n], 0, hgc, hreg)
+    stabilised = kept.eta > 0
     return ReferenceData(
-        ptr=kept.ptr[: n + 1], idx=kept.idx[:end], dx=kept.dx[:end], w=kept.w[:end], g=kept.g[:end],
-        g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=none, hreg=none, q=np.zeros((0, dim)),
-        q_rev=np.zeros((0, dim)), q_sum=np.zeros((0, dim)), gh=none, gh_rev=none, min_spacing=min_spacing,
-        stiffening=np.ones(n), kept=kept, bad=np.zeros(0, np.int64))
+        ptr=ptr, idx=idx, dx=dx, w=w, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
+        hreg=hreg, q=kept.q[:end] if stabilised else np.zeros((0, dim)),
+        q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
+        q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),
+        gh_rev=kept.gh_rev[:end] if stabilised else np.zeros(0), min_spacing=min_spacing, stiffening=stiffening,
+        kept=kept, bad=np.zeros(0, np.int64))

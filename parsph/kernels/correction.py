@@ -21,8 +21,8 @@ import numpy as np
 from numba import njit
 
 from parsph.errors import InputError
-from parsph.kernels.functions import KERNEL_NAMES, evaluate, value_and_slope
-from parsph.materials.elastic import inverse, symmetric_extremes
+from parsph.kernels.functions import KERNEL_NAMES, curvature, evaluate, value_and_slope
+from parsph.materials.elastic import det, inverse, symmetric_extremes
 from parsph.neighbors import Pairs
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
@@ -129,7 +129,7 @@ def _reverse_index(ptr, idx, rows, rev):
 def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
     """values of the reverse pairs (reverse_index), NaN where j has no row."""
     if values.ndim == 2:
-        out = np.empty_like(values)
+        out = np.empty((len(rev), values.shape[1]))
         _gather_rows(values, rev, out)
         return out
     out = values[np.maximum(rev, 0)]
@@ -198,40 +198,54 @@ def reference_pairs(
 
 
 class KeptPairs:
-    """The per-pair reference data of an Eulerian kernel, rebuilt at every step from lists
-    kept between searches (candidates found with a skin) by compiled passes (`rebuild`)
-    into arrays allocated once per search: the pairs of the owned rows closer than the
-    mean of their supports (as neighbors.find_pairs would find them now, in the same
-    order), kernel values and corrected gradients with c_ij = V_j (dW/dr / r) and the
-    inverse of L_i in closed form, the reverse gradients g_ji from L_j^-1 (the rows of the
-    ghosts are summed for L only), and the nearest neighbour distance."""
+    """The per-pair reference data of an updated reference (an Eulerian kernel, rebuilt at
+    every step from lists kept between searches, found with a skin; updated-Lagrangian
+    SPH, at each update), by compiled passes (`rebuild`) into arrays allocated once per
+    search: the pairs of the owned rows closer than the mean of their supports (as
+    neighbors.find_pairs would find them now, in the same order), kernel values and
+    corrected gradients with c_ij = V_j (dW/dr / r) and the inverse of L_i in closed form,
+    the reverse gradients g_ji from L_j^-1 (the rows of the ghosts are summed for L only),
+    the nearest neighbour distance; and with `hessian` (eta, weighted) the stabilisation
+    of formulations.reference (q, gh, their reverses, q's row sums and the stiffening)
+    from the corrected Hessians' row sums Hc_ij 1 = V_j (H_ij 1 - w_ij As_i X_ij),
+    As_i = (sum_b C_i[:, b, :]) D_i^-1 (kernels.hessian), h_i = (l_i, ..., l_i)."""
 
-    def __init__(self, candidates: Pairs, dim: int, kernel: str):
+    def __init__(self, candidates: Pairs, dim: int, kernel: str, hessian: tuple | None = None):
         self.candidates = candidates
         size, rows = len(candidates.idx), candidates.rows
         self.kind = KERNEL_NAMES.index(kernel)
+        self.eta, weighted = hessian if hessian else (0.0, True)
+        self.passes = _compile_kept(dim, self.eta > 0, weighted)
         self.ptr = np.zeros(rows + 1, np.int64)
         self.idx = np.empty(size, np.int64)
         self.dx, self.g, self.g_rev = (np.empty((size, dim)) for _ in range(3))
-        self.w, self.slope = np.empty(size), np.empty(size)
+        self.w, self.h, self.slope = np.empty(size), np.empty(size), np.empty(size)
         self.g_sum = np.empty((rows, dim))
         self.Linv = np.empty((rows, dim, dim))
+        stabilised = size if self.eta > 0 else 0
+        self.Hs, self.q, self.q_rev = (np.empty((stabilised, dim)) for _ in range(3))
+        self.gh, self.gh_rev = np.empty(stabilised), np.empty(stabilised)
+        self.As = np.empty((rows if self.eta > 0 else 0, dim, dim))
+        self.q_sum = np.empty((rows if self.eta > 0 else 0, dim))
         self.report = np.zeros(3)
-        self.scratch = (np.empty((dim, dim)), np.empty((3, 3)))
+        self.scratch = (np.empty((dim, dim)), np.empty((3, 3)), np.empty((dim, dim)), np.empty((dim, dim)))
 
     def rebuild(self, positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
-                plain: np.ndarray, n_owned: int, min_spacing: np.ndarray) -> int:
+                plain: np.ndarray, n_owned: int, min_spacing: np.ndarray, stiffening: np.ndarray) -> int:
         """Rebuild at `positions` (rows with `plain` take the plain SPH gradient, as in
         reference_pairs); the nearest neighbour distance of the owned rows into
-        `min_spacing`. Returns the number of pairs of the owned rows; raises InputError on a
-        position that is not a number, coinciding particles or a singular L_i."""
+        `min_spacing`, the stabilisation's stiffening into `stiffening`. Returns the number
+        of pairs of the owned rows; raises InputError on a position that is not a number,
+        coinciding particles or a singular L_i or Hessian correction."""
         cand = self.candidates
-        kept_rows, kept_gradients = _compile_kept(positions.shape[1])
+        kept_rows, kept_gradients = self.passes
         code = kept_rows(cand.ptr, cand.idx, positions, volume, support, self.kind, plain, n_owned, self.ptr,
-                          self.idx, self.dx, self.w, self.slope, self.Linv, min_spacing, *self.scratch, self.report)
+                         self.idx, self.dx, self.w, self.h, self.slope, self.Hs, self.Linv, self.As, min_spacing,
+                         *self.scratch, self.report)
         if code == _FINE:
-            kept_gradients(n_owned, self.ptr, self.idx, self.dx, self.slope, volume, self.Linv, self.g, self.g_rev,
-                            self.g_sum)
+            kept_gradients(n_owned, self.ptr, self.idx, self.dx, self.w, self.slope, volume, support, self.Linv,
+                           self.Hs, self.As, self.eta, self.g, self.g_rev, self.g_sum, self.q, self.q_rev,
+                           self.q_sum, self.gh, self.gh_rev, stiffening)
             return int(self.ptr[n_owned])
         a, b, value = int(self.report[0]), int(self.report[1]), self.report[2]
         if code == _NOT_A_NUMBER:
@@ -240,32 +254,38 @@ class KeptPairs:
         where = ", ".join(f"{c:.6g}" for c in positions[a])
         if code == _COINCIDE:
             raise InputError(f"particles {int(gid[a])} and {int(gid[b])} coincide at ({where})")
+        if code == _HESSIAN:
+            raise InputError(f"the Hessian correction of particle {int(gid[a])} is singular (its neighbours are "
+                             "collinear); increase kernel.support")
         raise InputError(
             f"correction matrix L of particle {int(gid[a])} at ({where}) is singular or ill-conditioned "
             f"(condition number {value:.3g}); {b} particle(s) affected. Increase kernel.support or "
             "kernel.neighbours, or check for isolated or collinear particles.")
 
 
-_FINE, _NOT_A_NUMBER, _COINCIDE, _SINGULAR = 0, 1, 2, 3
+_FINE, _NOT_A_NUMBER, _COINCIDE, _SINGULAR, _HESSIAN = 0, 1, 2, 3, 4
 
 
 @functools.lru_cache(maxsize=None)
-def _compile_kept(dim: int) -> tuple:
-    """(_kept_rows, _kept_gradients) compiled for dimension `dim` (a constant of the
-    machine code: its branches on it are folded away)."""
+def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
+    """(_kept_rows, _kept_gradients) compiled for dimension `dim`, with or without Hessian
+    stabilisation (its A term weighted by the kernel or not): constants of the machine
+    code, whose branches on them are folded away."""
     @njit(cache=True, _nrt=False)
-    def _kept_rows(cptr, cidx, X, volume, support, kind, plain, n_owned, ptr, idx, dx, w, slope, Linv, min_spacing,
-                   L, M, report):
-        """KeptPairs.rebuild, first pass, row by row: the kept candidates (stored for the owned
-        rows) with their kernel values and L_i, its condition number and inverse.
-        report: (row, neighbour or count of singular rows, condition). The sums of a row run in
-        scalars (L is symmetric): stores to arrays that might alias would keep the compiler
-        from holding them in registers."""
+    def _kept_rows(cptr, cidx, X, volume, support, kind, plain, n_owned, ptr, idx, dx, w, hp, slope, Hs, Linv, As,
+                   min_spacing, L, M, D, Dinv, report):
+        """KeptPairs.rebuild, first pass, row by row: the kept candidates (stored for the
+        owned rows) with their kernel values and L_i, its condition number and inverse
+        (and D_i, C_i summed over its middle index, As_i). report: (row, neighbour or count
+        of singular rows, condition). The sums of a row run in scalars: stores to arrays
+        that might alias would keep the compiler from holding them in registers."""
         k = 0
         first_bad, bad = -1, 0
         for i in range(len(cptr) - 1):
             owned = i < n_owned
             l00 = l01 = l02 = l11 = l12 = l22 = 0.0
+            d00 = d01 = d02 = d11 = d12 = d22 = 0.0
+            c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
             nearest = np.inf
             count = 0
             for p in range(cptr[i], cptr[i + 1]):
@@ -293,6 +313,27 @@ def _compile_kept(dim: int) -> tuple:
                 l12 += c * e1 * e2
                 l22 += c * e2 * e2
                 count += 1
+                if hessian:  # H_ab = b e_a e_b + s delta_ab, summed over b
+                    b_coef = (curvature(kind, r, h, dim) - s) / (r * r)
+                    total = e0 + e1 + e2
+                    h0, h1, h2 = b_coef * e0 * total + s, b_coef * e1 * total + s, b_coef * e2 * total + s
+                    v = volume[j]
+                    vw = v * (value if weighted else 1.0)
+                    d00 += vw * e0 * e0
+                    d01 += vw * e0 * e1
+                    d02 += vw * e0 * e2
+                    d11 += vw * e1 * e1
+                    d12 += vw * e1 * e2
+                    d22 += vw * e2 * e2
+                    c00 += v * h0 * e0
+                    c01 += v * h0 * e1
+                    c02 += v * h0 * e2
+                    c10 += v * h1 * e0
+                    c11 += v * h1 * e1
+                    c12 += v * h1 * e2
+                    c20 += v * h2 * e0
+                    c21 += v * h2 * e1
+                    c22 += v * h2 * e2
                 if owned:
                     idx[k] = j
                     dx[k, 0] = e0
@@ -301,12 +342,43 @@ def _compile_kept(dim: int) -> tuple:
                     if dim > 2:
                         dx[k, 2] = e2
                     w[k] = value
+                    hp[k] = h
                     slope[k] = s
+                    if hessian:
+                        Hs[k, 0] = h0
+                        if dim > 1:
+                            Hs[k, 1] = h1
+                        if dim > 2:
+                            Hs[k, 2] = h2
                     nearest = min(nearest, r)
                     k += 1
             if owned:
                 ptr[i + 1] = k
                 min_spacing[i] = nearest
+            if hessian and count:
+                D[0, 0] = d00
+                if dim > 1:
+                    D[0, 1] = D[1, 0] = d01
+                    D[1, 1] = d11
+                if dim > 2:
+                    D[0, 2] = D[2, 0] = d02
+                    D[1, 2] = D[2, 1] = d12
+                    D[2, 2] = d22
+                if not abs(det(D, dim)) > 1e-300:
+                    report[0] = i
+                    return _HESSIAN
+                inverse(D, dim, Dinv)
+                for a in range(dim):
+                    ca0 = c00 if a == 0 else c10 if a == 1 else c20
+                    ca1 = c01 if a == 0 else c11 if a == 1 else c21
+                    ca2 = c02 if a == 0 else c12 if a == 1 else c22
+                    for b in range(dim):
+                        t = ca0 * Dinv[0, b]
+                        if dim > 1:
+                            t += ca1 * Dinv[1, b]
+                        if dim > 2:
+                            t += ca2 * Dinv[2, b]
+                        As[i, a, b] = t
             if plain[i]:
                 for a in range(dim):
                     for b in range(dim):
@@ -342,20 +414,25 @@ def _compile_kept(dim: int) -> tuple:
             return _SINGULAR
         return _FINE
 
-
     @njit(cache=True, _nrt=False)
-    def _kept_gradients(n_owned, ptr, idx, dx, slope, volume, Linv, g, g_rev, g_sum):
+    def _kept_gradients(n_owned, ptr, idx, dx, w, slope, volume, support, Linv, Hs, As, eta, g, g_rev, g_sum, q,
+                        q_rev, q_sum, gh, gh_rev, stiffening):
         """KeptPairs.rebuild, second pass over the owned rows: g_ij = V_j s_ij L_i^-1 X_ij and
         g_ji = V_i s_ij L_j^-1 X_ji (s = dW/dr / r), the same numbers as row j computes, and
-        the row sums of g."""
+        the row sums of g; with Hessian stabilisation q_ij = eta l_i Hc_ij 1 and
+        gh_ij = eta l_i g_ij . 1 with their reverses, q's row sums and the stiffening
+        1 + (sum |q| + sum |gh| sum |g|) / sum |g| (formulations.reference)."""
         for i in range(n_owned):
             s0 = s1 = s2 = 0.0
-            for q in range(ptr[i], ptr[i + 1]):
-                j = idx[q]
-                e0 = dx[q, 0]
-                e1 = dx[q, 1] if dim > 1 else 0.0
-                e2 = dx[q, 2] if dim > 2 else 0.0
-                c, b = volume[j] * slope[q], volume[i] * slope[q]
+            q0 = q1 = q2 = 0.0
+            size_g = size_q = size_gh = 0.0
+            li = 0.5 * support[i]
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                e0 = dx[p, 0]
+                e1 = dx[p, 1] if dim > 1 else 0.0
+                e2 = dx[p, 2] if dim > 2 else 0.0
+                c, b = volume[j] * slope[p], volume[i] * slope[p]
                 for a in range(dim):
                     t = Linv[i, a, 0] * e0
                     u = Linv[j, a, 0] * -e0
@@ -365,17 +442,53 @@ def _compile_kept(dim: int) -> tuple:
                     if dim > 2:
                         t += Linv[i, a, 2] * e2
                         u += Linv[j, a, 2] * -e2
-                    g[q, a] = c * t
-                    g_rev[q, a] = b * u
-                s0 += g[q, 0]
+                    g[p, a] = c * t
+                    g_rev[p, a] = b * u
+                s0 += g[p, 0]
                 if dim > 1:
-                    s1 += g[q, 1]
+                    s1 += g[p, 1]
                 if dim > 2:
-                    s2 += g[q, 2]
+                    s2 += g[p, 2]
+                if hessian:
+                    lj = 0.5 * support[j]
+                    wt = w[p] if weighted else 1.0
+                    sum_g = sum_rev = norm_g = norm_q = 0.0
+                    for a in range(dim):
+                        t = As[i, a, 0] * e0
+                        u = As[j, a, 0] * -e0
+                        if dim > 1:
+                            t += As[i, a, 1] * e1
+                            u += As[j, a, 1] * -e1
+                        if dim > 2:
+                            t += As[i, a, 2] * e2
+                            u += As[j, a, 2] * -e2
+                        q[p, a] = eta * li * volume[j] * (Hs[p, a] - wt * t)
+                        q_rev[p, a] = eta * lj * volume[i] * (Hs[p, a] - wt * u)
+                        sum_g += g[p, a]
+                        sum_rev += g_rev[p, a]
+                        norm_g += g[p, a] * g[p, a]
+                        norm_q += q[p, a] * q[p, a]
+                    gh[p] = eta * li * sum_g
+                    gh_rev[p] = eta * lj * sum_rev
+                    q0 += q[p, 0]
+                    if dim > 1:
+                        q1 += q[p, 1]
+                    if dim > 2:
+                        q2 += q[p, 2]
+                    size_g += math.sqrt(norm_g)
+                    size_q += math.sqrt(norm_q)
+                    size_gh += abs(gh[p])
             g_sum[i, 0] = s0
             if dim > 1:
                 g_sum[i, 1] = s1
             if dim > 2:
                 g_sum[i, 2] = s2
+            if hessian:
+                q_sum[i, 0] = q0
+                if dim > 1:
+                    q_sum[i, 1] = q1
+                if dim > 2:
+                    q_sum[i, 2] = q2
+                stiffening[i] = 1.0 + (size_q + size_gh * size_g) / size_g if size_g > 0.0 else 1.0
 
     return _kept_rows, _kept_gradients

@@ -75,6 +75,7 @@ __all__ = [
     "hessian",
     "evaluate",
     "value_and_slope",
+    "curvature",
 ]
 
 
@@ -246,6 +247,16 @@ KERNELS = {
 }
 
 KERNEL_NAMES = tuple(KERNELS)
+
+
+@njit(cache=True, inline="always")
+def curvature(kind, r, h, dim):
+    """d^2 W / dr^2 of the kernel KERNEL_NAMES[kind], support radius h."""
+    if kind == 0:
+        return cubic_spline_d2w(r, h, dim)
+    if kind == 1:
+        return wendland_c2_d2w(r, h, dim)
+    return spiky_d2w(r, h, dim)
 
 
 @njit(cache=True, inline="always")
