@@ -74,10 +74,12 @@ def block(*args, **kwargs) -> dict:
 
 
 def halves_in_contact(raw: dict) -> dict:
-    """The block's scene as two bodies, its halves x < 1/2 and x > 1/2, in contact."""
+    """The block's scene as two bodies, its halves (split at the lattice plane nearest
+    x = 1/2), in contact."""
     part = raw["geometry"].pop("parts")[0]
+    middle = round(0.5 / part["spacing"]) * part["spacing"]
     halves = []
-    for k, (lo, hi) in enumerate(((0.0, 0.5), (0.5, 1.0))):
+    for k, (lo, hi) in enumerate(((0.0, middle), (middle, 1.0))):
         box = dict(part, lower=[lo] + part["lower"][1:], upper=[hi] + part["upper"][1:])
         halves.append({"name": f"half{k}", "parts": [box], "material": raw.pop("material") if k == 0 else
                        dict(halves[0]["material"])})
