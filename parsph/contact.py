@@ -54,7 +54,8 @@ import numpy as np
 from mpi4py import MPI
 from numba import njit
 
-from parsph.neighbors import close_pairs, pair_keys
+from parsph.cells import close_pairs
+from parsph.neighbors import pair_keys
 from parsph.relations import Skin
 
 SKIN = 0.5  # of the largest contact distance

@@ -22,20 +22,29 @@ import numpy as np
 from mpi4py import MPI
 from numba import njit
 
-from parsph.neighbors import close_pairs
+from parsph.cells import close_pairs
 
 
 @dataclass
 class Relation:
-    """Rows: points 0..len(ptr)-2 of set `rows`; `idx`: local rows of set `cols`."""
+    """CSR rows: points 0..n_rows-1 of set `rows`, each related to the points `idx` (local
+    rows of set `cols`) in global-id order: particle neighbours (neighbors.find_pairs),
+    Galerkin trial and test relations (find_relation)."""
 
-    rows: str
-    cols: str
-    ptr: np.ndarray  # int64 (rows + 1,)
+    ptr: np.ndarray  # int64 (n_rows + 1,)
     idx: np.ndarray  # int64 (pairs,)
+    rows: str = "particles"
+    cols: str = "particles"
+
+    @property
+    def n_rows(self) -> int:
+        return len(self.ptr) - 1
+
+    def counts(self) -> np.ndarray:
+        return np.diff(self.ptr)
 
     def row_of_pair(self) -> np.ndarray:
-        return np.repeat(np.arange(len(self.ptr) - 1, dtype=np.int64), np.diff(self.ptr))
+        return np.repeat(np.arange(self.n_rows, dtype=np.int64), self.counts())
 
 
 def find_relation(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray, gid_cols: np.ndarray,
@@ -48,7 +57,7 @@ def find_relation(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray, 
     n = len(x_rows)
     reach = (float(support.max()) if len(support) else 0.0) + skin
     if n == 0 or len(x_cols) == 0:
-        return Relation(rows, cols, np.zeros(n + 1, np.int64), np.zeros(0, np.int64))
+        return Relation(np.zeros(n + 1, np.int64), np.zeros(0, np.int64), rows, cols)
     # one cloud of both sets; only pairs across them (a row point first)
     side = np.concatenate([np.zeros(n, np.int64), np.ones(len(x_cols), np.int64)])
     a, b = close_pairs(np.concatenate([x_rows, x_cols]), reach, side, np.array([[False, True], [True, False]]))
@@ -61,7 +70,7 @@ def find_relation(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray, 
     order = np.lexsort((gid_cols[j], i))
     ptr = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(i, minlength=n), out=ptr[1:])
-    return Relation(rows, cols, ptr, j[order])
+    return Relation(ptr, j[order], rows, cols)
 
 
 class Skin:
@@ -125,7 +134,7 @@ class KeptRelation:
     def current(self, x_rows: np.ndarray, x_cols: np.ndarray, support: np.ndarray) -> Relation:
         c = self.candidates
         _compile_within(x_rows.shape[1])(c.ptr, c.idx, x_rows, x_cols, support, self.by_cols, self.ptr, self.idx)
-        return Relation(c.rows, c.cols, self.ptr, self.idx[: self.ptr[-1]])
+        return Relation(self.ptr, self.idx[: self.ptr[-1]], c.rows, c.cols)
 
 
 @functools.lru_cache(maxsize=None)

@@ -240,7 +240,7 @@ def test_close_pairs_are_every_pair_within_the_radius(dim, count, r, spread):
     """The cell search finds every pair at most r apart, once (i < j), against all pairs by
     brute force; with the cells too many for a table (a sparse cloud), by bisection; with
     too many cells per dimension, by a k-d tree."""
-    from parsph.neighbors import close_pairs
+    from parsph.cells import close_pairs
 
     rng = np.random.default_rng(dim)
     x = rng.random((count, dim)) * spread

@@ -146,7 +146,7 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
              options: list) -> ReferenceData:
     """The reference data of an updated reference (one body) from its KeptPairs (views of
     their arrays, rebuilt in place at the next step of an Eulerian kernel)."""
-    rows = kept.candidates.rows
+    rows = kept.candidates.n_rows
     plain = np.full(rows, not options[0].corrected)
     min_spacing, stiffening = np.empty(n), np.ones(n)
     end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening)

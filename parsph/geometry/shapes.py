@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from parsph.neighbors import kdtree
+from parsph.cells import kdtree
 
 from .lattice import _check_count, _nonnegative, _positive, _ravel_first_fastest, _vector
 

@@ -5,7 +5,7 @@ import operator
 
 import numpy as np
 
-from parsph.neighbors import kdtree
+from parsph.cells import kdtree
 
 from .lattice import _positive
 

@@ -23,7 +23,7 @@ from numba import njit
 from parsph.errors import InputError
 from parsph.kernels.functions import KERNEL_NAMES, curvature, evaluate, value_and_slope
 from parsph.materials.elastic import det, inverse, symmetric_extremes
-from parsph.neighbors import Pairs
+from parsph.relations import Relation
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
 # round-off by that factor.
@@ -34,7 +34,7 @@ MAX_CONDITION = 1e6
 class ReferencePairs:
     """Per-pair reference data (CSR, aligned with `pairs.idx`)."""
 
-    pairs: Pairs
+    pairs: Relation
     dx: np.ndarray  # (npairs, d) X_j - X_i
     w: np.ndarray  # (npairs,) W(|X_ij|, h_ij)
     h: np.ndarray  # (npairs,) pair support h_ij = (h_i + h_j) / 2
@@ -76,11 +76,11 @@ def _corrected_gradients(ptr, idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum):
                 g_sum[i, a] += g[p, a]
 
 
-def reverse_index(pairs: Pairs) -> np.ndarray:
+def reverse_index(pairs: Relation) -> np.ndarray:
     """For each pair p = (i, j), the index of the pair (j, i) in j's row, or -1 if j has no
     row."""
     rev = np.empty(len(pairs.idx), np.int64)
-    _reverse_index(pairs.ptr, pairs.idx, pairs.rows, rev)
+    _reverse_index(pairs.ptr, pairs.idx, pairs.n_rows, rev)
     return rev
 
 
@@ -139,7 +139,7 @@ def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
 
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
-    pairs: Pairs, kernel: str, corrected: np.ndarray | None = None,
+    pairs: Relation, kernel: str, corrected: np.ndarray | None = None,
     detached: np.ndarray | None = None, tolerant: bool = False,
 ) -> ReferencePairs:
     """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
@@ -149,7 +149,7 @@ def reference_pairs(
     `tolerant`: singular or ill-conditioned rows are listed in `bad` (with L_i^-1 = -I)
     instead of raising."""
     dim = positions.shape[1]
-    rows = pairs.rows
+    rows = pairs.n_rows
     row = pairs.row_of_pair()
     dx = positions[pairs.idx] - positions[row]
     dist = np.sqrt(np.einsum("pa,pa->p", dx, dx))
@@ -210,9 +210,9 @@ class KeptPairs:
     from the corrected Hessians' row sums Hc_ij 1 = V_j (H_ij 1 - w_ij As_i X_ij),
     As_i = (sum_b C_i[:, b, :]) D_i^-1 (kernels.hessian), h_i = (l_i, ..., l_i)."""
 
-    def __init__(self, candidates: Pairs, dim: int, kernel: str, hessian: tuple | None = None):
+    def __init__(self, candidates: Relation, dim: int, kernel: str, hessian: tuple | None = None):
         self.candidates = candidates
-        size, rows = len(candidates.idx), candidates.rows
+        size, rows = len(candidates.idx), candidates.n_rows
         self.kind = KERNEL_NAMES.index(kernel)
         self.eta, weighted = hessian if hessian else (0.0, True)
         self.passes = _compile_kept(dim, self.eta > 0, weighted)

@@ -80,7 +80,7 @@ def corrected_hessians(pairs, dx, h_pair, measure, gid, kernel: str, weighted: b
     w, dwdr, d2w = evaluate(kernel, dist, h_pair, dim)
     wt = w if weighted else np.ones_like(w)
     Hc = np.empty((len(dx), dim, dim))
-    bad = np.zeros(pairs.rows, bool)
+    bad = np.zeros(pairs.n_rows, bool)
     _corrected(pairs.ptr, dx, wt, dwdr, d2w, dist, np.ascontiguousarray(measure[pairs.idx]), dim, Hc, bad)
     if bad.any():
         first = int(np.flatnonzero(bad)[0])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from parsph.neighbors import kdtree
+from parsph.cells import kdtree
 
 
 def _smallest(c: np.ndarray, ids: np.ndarray, target: int, comm) -> np.ndarray:

@@ -27,7 +27,7 @@ from mpi4py import MPI
 
 from parsph import fields as registry
 from parsph.errors import InputError, ParsphError
-from parsph.neighbors import kdtree
+from parsph.cells import kdtree
 from parsph.parallel.decomposition import LocalBody
 
 
