@@ -778,24 +778,27 @@ class Simulation:
         for b in self.bodies:  # the penalty restarts at 0
             self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         n = self.n_owned
-        searching = self.search_rule.every == 1 or self.search_rule.due(self.X[:n] + self.u[:n])
+        moved = {name: self._moved(name) for name in self.sets}  # stress points at the current configuration
+        searching = self.search_rule.every == 1 or self.search_rule.due(
+            np.concatenate([self.X[:n] + self.u[:n], *moved.values()]))
         if searching:
-            self._search()
+            self._search(moved)
         else:
-            self._recommit()
+            self._recommit(moved)
         self.search_rule.stepped()
         self.stage_seconds["reference update"] += time.perf_counter() - start
         self.updates += 1
         self.since_update = 0
         return searching
 
-    def _search(self) -> None:
-        """The reference update with a new decomposition: ownership, ghosts, neighbours."""
+    def _search(self, moved: dict) -> None:
+        """The reference update with a new decomposition: ownership, ghosts, neighbours
+        (`moved`: the owned points of the other sets at their new reference, _moved)."""
         n = self.n_owned
         owned = dict(self.particles.migrating(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
                      measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
         # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
-        sets = {name: dict(points.migrating(), Xr=self._moved(name), Fr=points.owned("F").copy())
+        sets = {name: dict(points.migrating(), Xr=moved[name], Fr=points.owned("F").copy())
                 for name, points in self.sets.items()}
         if self.comm.size > 1 and not sets:
             work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
@@ -807,9 +810,10 @@ class Simulation:
                 add_ghosts(owned, "Xr", self.comm, skin=self.skin)
         with self._update_failure():
             self._adopt(local)
-        self.search_rule.searched(self.Xr[: self.n_owned])
+        self.search_rule.searched(np.concatenate([self.Xr[: self.n_owned],
+                                                  *(points.owned("Xr") for points in self.sets.values())]))
 
-    def _recommit(self) -> None:
+    def _recommit(self, moved: dict) -> None:
         """The reference update between searches (Eulerian kernel): X^r = x, F^r = F,
         V^r = J V^0 on the owned particles (and their moved stress points), every carried
         field refreshed on both ghost layers, then the reference data and the Galerkin
@@ -820,7 +824,7 @@ class Simulation:
         eye = np.eye(self.dim)
         for name, points in self.sets.items():
             A = points.arrays
-            A["Xr"][: points.n_owned] = self._moved(name)
+            A["Xr"][: points.n_owned] = moved[name]
             A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
             A["fs"][:] = eye
             points.refresh("Xr", "Fr")
