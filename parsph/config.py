@@ -152,13 +152,15 @@ SECTIONS: dict[str, dict[str, Key]] = {
                       "(lagrangian, the default) or in the current one, rebuilt at every step (eulerian) "
                       "[R eq. 16-17, Table 2]"),
         "search_every": Key("int", None, positive,
-                            "eulerian: find neighbours and exchange ghosts at most every N steps (default 30, "
-                            "as [R §9.3]), sooner when a particle has moved half the skin; the shape "
-                            "functions are recomputed at every step (kbm, efg: their point relations too, "
-                            "from this rank's points); the result is that of a search at every step"),
+                            "eulerian, ulsph: find neighbours, rebalance and exchange ghosts at most every "
+                            "N reference updates (default 30, as [R §9.3]; an Eulerian kernel updates at "
+                            "every step), sooner when a particle has moved half the skin; the corrections "
+                            "and shape functions are recomputed at every update (kbm, efg: their point "
+                            "relations too, from this rank's points); the result is that of a search at "
+                            "every update"),
         "skin": Key("float", None, in_range(0.0, 2.0),
-                    "eulerian: how far beyond the support neighbours are kept between searches, as a "
-                    "fraction of the support (default 0.25; at most 2: the lists hold (1 + skin)^d "
+                    "eulerian, ulsph: how far beyond the support neighbours are kept between searches, "
+                    "as a fraction of the support (default 0.25; at most 2: the lists hold (1 + skin)^d "
                     "times the pairs)"),
         "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
                               "paper: [G eq. 32]; variational: forces from the penalty energy"),
@@ -706,8 +708,8 @@ def _formulation(path: str, raw: Any, dim: int) -> dict:
         raise InputError(f"{path}.hourglass applies to a Lagrangian kernel: with kernel = 'eulerian' the reference "
                          "is the current configuration, where F explains every separation (give 0 or leave it out)")
     for key in ("search_every", "skin"):
-        if form[key] is not None and form["kernel"] != "eulerian":
-            raise InputError(f"{path}.{key} applies to kernel = 'eulerian'")
+        if form[key] is not None and form["kernel"] != "eulerian" and form["type"] != "ulsph":
+            raise InputError(f"{path}.{key} applies to kernel = 'eulerian' and type = 'ulsph'")
         if form[key] is None:  # absent: as in scenes written before the key existed
             del form[key]
     if form["kernel"] != "eulerian":  # absent: as in scenes written before the key existed
@@ -842,8 +844,8 @@ def validate(raw: dict) -> dict:
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
             "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
-    if scene["symmetry"] and any(search_every(body["formulation"]) > 1 for body in bodies(scene)):
-        raise InputError("[[symmetry]] planes with formulation.kernel = 'eulerian' need "
+    if scene["symmetry"] and any(search_every(body["formulation"], True) > 1 for body in bodies(scene)):
+        raise InputError("[[symmetry]] planes with formulation.kernel = 'eulerian' or type = 'ulsph' need "
                          "formulation.search_every = 1 (mirror images are made at each search)")
     for b, body in enumerate(bodies(scene)):
         if body["formulation"]["type"] in ("kbm", "efg"):
@@ -891,14 +893,21 @@ def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
     return out
 
 
-def search_every(form: dict) -> int:
-    """Steps between neighbour searches of a resolved formulation (1: a Lagrangian kernel)."""
-    return form.get("search_every", 30) if form.get("kernel") == "eulerian" else 1
+def _kept_lists(form: dict) -> bool:
+    """Whether a resolved formulation keeps its neighbour lists between reference updates."""
+    return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
+
+
+def search_every(form: dict, symmetry: bool = False) -> int:
+    """Reference updates between neighbour searches of a resolved formulation (1: it never
+    updates its reference, or searches at each update, as with `symmetry` planes unless
+    given: their mirror images are made at each search)."""
+    return form.get("search_every", 1 if symmetry else 30) if _kept_lists(form) else 1
 
 
 def skin(form: dict) -> float:
-    """The skin of an Eulerian kernel's neighbour lists, as a fraction of the support."""
-    return form.get("skin", 0.25) if form.get("kernel") == "eulerian" else 0.0
+    """The skin of the kept neighbour lists, as a fraction of the support (0: none kept)."""
+    return form.get("skin", 0.25) if _kept_lists(form) else 0.0
 
 
 def _check_expressions(path: str, texts: list, raw: dict, dim: int) -> None:

@@ -116,7 +116,7 @@ class Simulation:
         supports = local.fields["support"][: local.n_owned]
         self.search_rule = Skin(config.skin(specs[0]["formulation"]) * comm.allreduce(
             float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
-            config.search_every(specs[0]["formulation"]))
+            config.search_every(specs[0]["formulation"], bool(scene["symmetry"])))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
         if self.updated:
@@ -292,7 +292,8 @@ class Simulation:
     def _reference_shift(self) -> np.ndarray:
         """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
         X^r = X + u (as it is after every move of its reference), so that d is exactly zero
-        in the new reference, however the lists were found (formulations.tlsph.stress_at)."""
+        in the new reference, whether the lists were searched or kept: its forces use the
+        stress of the last reference (formulations.tlsph.stress_at)."""
         if self.eulerian:
             return np.where(self.X + self.u == self.Xr, self.u, self.Xr - self.X)
         return self.Xr - self.X
@@ -834,7 +835,10 @@ class Simulation:
         self.volume_r[:n] = self.J[:n] * self.volume[:n]
         self.decomp.refresh_all(*(self.particles.arrays[name] for name in fields.migrating(self.carried)
                                   if name != "gid"))
-        self.shift[:] = self.u  # d = 0 exactly (_reference_shift)
+        if self.eulerian:
+            self.shift[:] = self.u  # d = 0 exactly (_reference_shift)
+        else:
+            np.subtract(self.Xr, self.X, out=self.shift)
         self.d[:] = 0.0
         self.fs[:] = eye
         self.hg_psi[:] = 0.0

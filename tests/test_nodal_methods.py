@@ -399,6 +399,7 @@ def test_eulerian_kernel_sph_and_rlm_clump_in_tension_efg_and_the_lagrangian_do_
 
 
 def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body():
+    from parsph import config
     from parsph.errors import InputError
     from physics import scene_from
 
@@ -409,14 +410,17 @@ def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body
             scene_from(block_2d().replace("hourglass = 0.0\n", ""),
                        [f'formulation.type="{ftype}"', 'formulation.kernel="eulerian"', *extra])
     assert "kernel" not in scene_from(block_2d(), ['formulation.kernel="lagrangian"'])["formulation"]
-    with pytest.raises(InputError, match="formulation.search_every applies to kernel = 'eulerian'"):
+    with pytest.raises(InputError, match="search_every applies to kernel = 'eulerian' and type = 'ulsph'"):
         scene_from(block_2d(), ['formulation.type="sph"', "formulation.search_every=10"])
     with pytest.raises(InputError, match="search_every must be > 0"):
         scene_from(block_2d(), ['formulation.type="sph"', 'formulation.kernel="eulerian"', "formulation.search_every=0"])
     text = block_2d() + "[[symmetry]]\naxis = 0\nposition = 0.0\n"
     with pytest.raises(InputError, match="need formulation.search_every = 1"):
-        scene_from(text, ['formulation.type="sph"', 'formulation.kernel="eulerian"'])
-    assert scene_from(text, ['formulation.type="sph"', 'formulation.kernel="eulerian"', "formulation.search_every=1"])
+        scene_from(text, ['formulation.type="sph"', 'formulation.kernel="eulerian"', "formulation.search_every=10"])
+    for form in (['formulation.type="sph"', 'formulation.kernel="eulerian"'], ["formulation.type='ulsph'",
+                                                                             "formulation.update_every=3"]):
+        scene = scene_from(text, form)  # with mirror images the lists are searched at each update
+        assert config.search_every(scene["formulation"], bool(scene["symmetry"])) == 1
     with pytest.raises(InputError, match="need a scene of one body"):
         scene_from("two_blocks", ['bodies.1.formulation.kernel="eulerian"'])
 
