@@ -22,7 +22,7 @@ from numba import njit
 
 from parsph.errors import InputError
 from parsph.kernels.functions import KERNEL_NAMES, curvature, evaluate, value_and_slope
-from parsph.materials.elastic import det, inverse, symmetric_extremes
+from parsph.materials.elastic import det, inverse, right_cauchy_green, symmetric_extremes
 from parsph.relations import Relation
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
@@ -266,6 +266,17 @@ class KeptPairs:
 _FINE, _NOT_A_NUMBER, _COINCIDE, _SINGULAR, _HESSIAN = 0, 1, 2, 3, 4
 
 
+@njit(cache=True, inline="always")
+def _row_times(M, i, a, e0, e1, e2, dim):
+    """sum_b M[i, a, b] e_b over the first dim components of e."""
+    t = M[i, a, 0] * e0
+    if dim > 1:
+        t += M[i, a, 1] * e1
+    if dim > 2:
+        t += M[i, a, 2] * e2
+    return t
+
+
 @functools.lru_cache(maxsize=None)
 def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
     """(_kept_rows, _kept_gradients) compiled for dimension `dim`, with or without Hessian
@@ -394,12 +405,7 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                 L[2, 2] = l22
             cond = np.inf
             if count:
-                for a in range(dim):
-                    for b in range(dim):
-                        t = 0.0
-                        for m in range(dim):
-                            t += L[m, a] * L[m, b]
-                        M[a, b] = t
+                right_cauchy_green(L, dim, M)  # L^T L
                 small, large = symmetric_extremes(M, dim)
                 if small > 0.0:
                     cond = math.sqrt(large / small)
@@ -433,17 +439,9 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                 e1 = dx[p, 1] if dim > 1 else 0.0
                 e2 = dx[p, 2] if dim > 2 else 0.0
                 c, b = volume[j] * slope[p], volume[i] * slope[p]
-                for a in range(dim):
-                    t = Linv[i, a, 0] * e0
-                    u = Linv[j, a, 0] * -e0
-                    if dim > 1:
-                        t += Linv[i, a, 1] * e1
-                        u += Linv[j, a, 1] * -e1
-                    if dim > 2:
-                        t += Linv[i, a, 2] * e2
-                        u += Linv[j, a, 2] * -e2
-                    g[p, a] = c * t
-                    g_rev[p, a] = b * u
+                for a in range(dim):  # X_ji = -X_ij: the negated sum is row j's to the bit
+                    g[p, a] = c * _row_times(Linv, i, a, e0, e1, e2, dim)
+                    g_rev[p, a] = b * -_row_times(Linv, j, a, e0, e1, e2, dim)
                 s0 += g[p, 0]
                 if dim > 1:
                     s1 += g[p, 1]
@@ -454,16 +452,8 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                     wt = w[p] if weighted else 1.0
                     sum_g = sum_rev = norm_g = norm_q = 0.0
                     for a in range(dim):
-                        t = As[i, a, 0] * e0
-                        u = As[j, a, 0] * -e0
-                        if dim > 1:
-                            t += As[i, a, 1] * e1
-                            u += As[j, a, 1] * -e1
-                        if dim > 2:
-                            t += As[i, a, 2] * e2
-                            u += As[j, a, 2] * -e2
-                        q[p, a] = eta * li * volume[j] * (Hs[p, a] - wt * t)
-                        q_rev[p, a] = eta * lj * volume[i] * (Hs[p, a] - wt * u)
+                        q[p, a] = eta * li * volume[j] * (Hs[p, a] - wt * _row_times(As, i, a, e0, e1, e2, dim))
+                        q_rev[p, a] = eta * lj * volume[i] * (Hs[p, a] + wt * _row_times(As, j, a, e0, e1, e2, dim))
                         sum_g += g[p, a]
                         sum_rev += g_rev[p, a]
                         norm_g += g[p, a] * g[p, a]
