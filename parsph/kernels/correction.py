@@ -267,6 +267,19 @@ _FINE, _NOT_A_NUMBER, _COINCIDE, _SINGULAR, _HESSIAN = 0, 1, 2, 3, 4
 
 
 @njit(cache=True, inline="always")
+def _symmetric(A, dim, a00, a01, a02, a11, a12, a22):
+    """A (dim x dim) = the symmetric matrix of the upper entries a_ij."""
+    A[0, 0] = a00
+    if dim > 1:
+        A[0, 1] = A[1, 0] = a01
+        A[1, 1] = a11
+    if dim > 2:
+        A[0, 2] = A[2, 0] = a02
+        A[1, 2] = A[2, 1] = a12
+        A[2, 2] = a22
+
+
+@njit(cache=True, inline="always")
 def _row_times(M, i, a, e0, e1, e2, dim):
     """sum_b M[i, a, b] e_b over the first dim components of e."""
     t = M[i, a, 0] * e0
@@ -367,14 +380,7 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                 ptr[i + 1] = k
                 min_spacing[i] = nearest
             if hessian and count:
-                D[0, 0] = d00
-                if dim > 1:
-                    D[0, 1] = D[1, 0] = d01
-                    D[1, 1] = d11
-                if dim > 2:
-                    D[0, 2] = D[2, 0] = d02
-                    D[1, 2] = D[2, 1] = d12
-                    D[2, 2] = d22
+                _symmetric(D, dim, d00, d01, d02, d11, d12, d22)
                 if not abs(det(D, dim)) > 1e-300:
                     report[0] = i
                     return _HESSIAN
@@ -395,14 +401,7 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                     for b in range(dim):
                         Linv[i, a, b] = -1.0 if a == b else 0.0
                 continue
-            L[0, 0] = l00
-            if dim > 1:
-                L[0, 1] = L[1, 0] = l01
-                L[1, 1] = l11
-            if dim > 2:
-                L[0, 2] = L[2, 0] = l02
-                L[1, 2] = L[2, 1] = l12
-                L[2, 2] = l22
+            _symmetric(L, dim, l00, l01, l02, l11, l12, l22)
             cond = np.inf
             if count:
                 right_cauchy_green(L, dim, M)  # L^T L
