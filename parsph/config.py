@@ -758,15 +758,48 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
         out.append(body)
     if not out:
         raise InputError("bodies is empty: give at least one [[bodies]] table, or none and a [material]")
-    if len(out) > 1 and any(b["formulation"]["type"] == "ulsph" or b["formulation"].get("kernel") == "eulerian"
-                            for b in out):
-        raise InputError("formulation.type = 'ulsph' and formulation.kernel = 'eulerian' need a scene of one body")
+    _check_updated_bodies(out)
     stabilised = {(b["formulation"]["hessian"], b["formulation"]["hessian_correction"]) for b in out
                   if b["formulation"]["hessian"] > 0}
     if len(stabilised) > 1:
         raise InputError("formulation.hessian: the bodies with Hessian stabilisation must share its value and "
                          f"hessian_correction, got {sorted(stabilised)}")
     return out
+
+
+def _check_updated_bodies(bodies_: list) -> None:
+    """The bodies whose reference moves (ulsph, or an Eulerian kernel) move it together: one
+    kind and one schedule (the reference update is one step of the whole scene); the other
+    bodies keep their initial reference beside them."""
+    moving = [(i, b["formulation"]) for i, b in enumerate(bodies_) if _moves(b)]
+    if not moving:
+        return
+    first, form = moving[0]
+    for i, other in moving[1:]:
+        if (other.get("kernel") == "eulerian") != (form.get("kernel") == "eulerian"):
+            raise InputError(f"bodies[{i}].formulation: a scene's bodies with an updated reference are all "
+                             f"type = 'ulsph' or all kernel = 'eulerian' (bodies[{first}] differs)")
+        for key in ("update_every", "update_strain", "search_every", "skin"):
+            if other.get(key) != form.get(key):
+                raise InputError(f"bodies[{i}].formulation.{key} = {other.get(key)!r}: the bodies with an updated "
+                                 f"reference update it together and share {key} (bodies[{first}] has "
+                                 f"{form.get(key)!r})")
+    for i, b in enumerate(bodies_):
+        if b["material"]["break_pairs"]:
+            raise InputError(f"bodies[{i}].material.break_pairs cannot be used in a scene with a body of "
+                             f"type = 'ulsph' or kernel = 'eulerian' (bodies[{first}]): pairs break in a fixed "
+                             "reference")
+
+
+def moving_formulation(scene: dict) -> dict | None:
+    """The formulation of the scene's first body whose reference moves (they share its
+    schedule), or None."""
+    return next((b["formulation"] for b in bodies(scene) if _moves(b)), None)
+
+
+def _moves(body: dict) -> bool:
+    """Whether a resolved body's reference moves (a rigid body carries no reference)."""
+    return not body.get("rigid", False) and _kept_lists(body["formulation"])
 
 
 def thickness(scene: dict) -> float:

@@ -84,6 +84,7 @@ class Body:
         self.density = spec["material"]["density"]
         kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
         self.formulation = kind(spec["formulation"], dim, self.law.law_id, damaged=self.failure_strain is not None)
+        self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0
         self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
         self.stages = []
@@ -104,19 +105,22 @@ class Simulation:
         self.bodies = [Body(b, spec, int(self.offsets[b]), int(self.offsets[b + 1]), dim)
                        for b, spec in enumerate(specs)]
         forms = [b.formulation for b in self.bodies]
-        self.updated = any(f.updated for f in forms)  # one body only (config)
-        self.eulerian = any(f.eulerian for f in forms)  # the reference moves at every step, inside it
+        moving = [b.formulation for b in self.bodies if b.moves]  # their reference moves, together (config)
+        self.updated = bool(moving)
+        self.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
         self.breaking = any(b.breaks_pairs for b in self.bodies)
         self.eta = max(f.eta for f in forms)  # the bodies with Hessian stabilisation share it (config)
         self.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
         self.hourglass = any(f.hourglass_form for f in forms)
-        self.update_every, self.update_strain = forms[0].update_every, forms[0].update_strain
-        # an Eulerian kernel's neighbour lists and ghost layers: searched at most every
-        # search_every steps, kept while no particle has moved half the skin since
+        schedule = (moving or forms)[0]  # the moving bodies share it (config)
+        self.update_every, self.update_strain = schedule.update_every, schedule.update_strain
+        # the neighbour lists and ghost layers of an updated reference: searched at most every
+        # search_every updates, kept while no particle has moved half the skin since
         supports = local.fields["support"][: local.n_owned]
-        self.search_rule = Skin(config.skin(specs[0]["formulation"]) * comm.allreduce(
+        kept = config.moving_formulation(scene) or specs[0]["formulation"]
+        self.search_rule = Skin(config.skin(kept) * comm.allreduce(
             float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
-            config.search_every(specs[0]["formulation"], bool(scene["symmetry"])))
+            config.search_every(kept, bool(scene["symmetry"])))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
         owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
         if self.updated:
@@ -220,6 +224,7 @@ class Simulation:
         self.n_owned = n
         self.gid = local.gid[:keep]
         self.body = body[:keep]
+        self.moves = np.array([b.moves for b in self.bodies])[self.body]  # the rows whose reference moves
         for b in self.bodies:
             b.lo, b.hi = (int(k) for k in np.searchsorted(self.gid[:n], [b.first, b.last]))
         self.X, self.mass, self.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
@@ -295,7 +300,7 @@ class Simulation:
         in the new reference, whether the lists were searched or kept: its forces use the
         stress of the last reference (formulations.tlsph.stress_at)."""
         if self.eulerian:
-            return np.where(self.X + self.u == self.Xr, self.u, self.Xr - self.X)
+            return np.where((self.X + self.u == self.Xr) & self.moves[:, None], self.u, self.Xr - self.X)
         return self.Xr - self.X
 
     def _failed(self, state: np.ndarray | None, body: np.ndarray) -> np.ndarray | None:
@@ -519,10 +524,11 @@ class Simulation:
                 step, worst, first = rigid.stable_step(b, self.omega_c2, self.v, self.contact)
             else:
                 step, worst, first = tlsph.stable_time_step(
-                    b.lo, b.hi, self.fs, self.F, self.J, ref.min_spacing, ref.stiffening, b.constants.wave_speed,
-                    b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
+                    b.lo, b.hi, self.fs if b.moves else self.F, self.F, self.J, ref.min_spacing, ref.stiffening,
+                    b.constants.wave_speed, b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
                     b.formulation.hourglass_form, self.omega_c2, self.scratch33)
-            strain = max(strain, worst)
+            if b.moves:  # the strain since a reference that moves
+                strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
             if not step > 0.0:
@@ -777,11 +783,12 @@ class Simulation:
         as a search every step. Returns whether it searched (the arrays are new)."""
         start = time.perf_counter()
         for b in self.bodies:  # the penalty restarts at 0
-            self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
+            if b.moves:
+                self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         n = self.n_owned
         moved = {name: self._moved(name) for name in self.sets}  # stress points at the current configuration
         searching = self.search_rule.every == 1 or self.search_rule.due(
-            np.concatenate([self.X[:n] + self.u[:n], *moved.values()]))
+            np.concatenate([np.where(self.moves[:n, None], self.X[:n] + self.u[:n], self.Xr[:n]), *moved.values()]))
         if searching:
             self._search(moved)
         else:
@@ -796,8 +803,7 @@ class Simulation:
         """The reference update with a new decomposition: ownership, ghosts, neighbours
         (`moved`: the owned points of the other sets at their new reference, _moved)."""
         n = self.n_owned
-        owned = dict(self.particles.migrating(), Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(),
-                     measure_r=self.J[:n] * self.measure[:n], volume_r=self.J[:n] * self.volume[:n])
+        owned = dict(self.particles.migrating(), **self._new_reference())
         # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
         sets = {name: dict(points.migrating(), Xr=moved[name], Fr=points.owned("F").copy())
                 for name, points in self.sets.items()}
@@ -829,19 +835,17 @@ class Simulation:
             A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
             A["fs"][:] = eye
             points.refresh("Xr", "Fr")
-        self.Xr[:n] = self.X[:n] + self.u[:n]
-        self.Fr[:n] = self.F[:n]
-        self.measure_r[:n] = self.J[:n] * self.measure[:n]
-        self.volume_r[:n] = self.J[:n] * self.volume[:n]
+        for name, value in self._new_reference().items():
+            getattr(self, name)[:n] = value
         self.decomp.refresh_all(*(self.particles.arrays[name] for name in fields.migrating(self.carried)
                                   if name != "gid"))
+        np.subtract(self.Xr, self.X, out=self.shift)
         if self.eulerian:
-            self.shift[:] = self.u  # d = 0 exactly (_reference_shift)
-        else:
-            np.subtract(self.Xr, self.X, out=self.shift)
-        self.d[:] = 0.0
+            np.copyto(self.shift, self.u, where=self.moves[:, None])  # d = 0 exactly (_reference_shift)
+        np.subtract(self.u, self.shift, out=self.d)
+        self.d[self.moves] = 0.0
         self.fs[:] = eye
-        self.hg_psi[:] = 0.0
+        self.hg_psi[self.moves[: len(self.hg_psi)]] = 0.0
         with self._update_failure(), collective(self.comm):
             self.ref = reference.build(
                 self.Xr, self.measure_r, self.volume_r, self.support, self.gid, n, self.decomp.n_rows,
@@ -856,13 +860,25 @@ class Simulation:
         for b in self.bodies:
             b.stages = b.formulation.stages(self, b)
 
+    def _new_reference(self) -> dict:
+        """The owned particles' new updated reference: X^r = x, F^r = F, V^r = J V^0 (Remark 1)
+        where it moves; the bodies that keep their initial reference keep it."""
+        n = self.n_owned
+        new = dict(Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(), measure_r=self.J[:n] * self.measure[:n],
+                   volume_r=self.J[:n] * self.volume[:n])
+        still = ~self.moves[:n]
+        if still.any():
+            for name, value in new.items():
+                value[still] = getattr(self, name)[:n][still]
+        return new
+
     def _moved(self, name: str) -> np.ndarray:
         """The owned points of set `name` at their new updated reference, each body's moved
         with its particles (formulations.galerkin.GalerkinFormulation.moved)."""
         Xr = self.sets[name].owned("Xr").copy()
         for b in self.bodies:
             lo, hi = b.set_rows[name]
-            if hi > lo:
+            if hi > lo and b.moves:
                 Xr[lo:hi] = b.formulation.moved(self, b)
         return Xr
 

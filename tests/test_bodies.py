@@ -56,6 +56,38 @@ def test_a_body_moves_as_it_would_alone(hessian):
     assert d_both["kinetic_energy.rubber"] > 0 and d_both["strain_energy.rubber"] > 0
 
 
+@pytest.mark.parametrize("updated, updates", [({"type": "ulsph", "update_every": 3, "hourglass": 20.0}, 20),
+                                              ({"type": "rlm", "kernel": "eulerian", "search_every": 7}, 60)],
+                         ids=["ulsph", "eulerian"])
+def test_an_updated_body_moves_beside_a_total_lagrangian_one_as_each_alone(updated, updates):
+    """The rubber block of two_blocks in an updated reference (ulsph updated every 3 steps,
+    or RLM with the Eulerian kernel) beside the steel block in its initial one, at a fixed
+    step: the rubber block follows its run alone bit for bit through every update; the
+    steel block keeps its reference and follows its run alone to round-off (its reference
+    data is built by the updated reference's compiled builder, as the rubber block's)."""
+    raw = _raw()
+    raw["time"]["dt"] = 2e-7
+    raw["bodies"][1]["formulation"] = updated
+    both = _sim(copy.deepcopy(raw), steps=60)
+    assert both.updates == updates
+    steel_raw, rubber_raw = copy.deepcopy(raw), copy.deepcopy(raw)
+    del steel_raw["bodies"][1], steel_raw["initial"][1], steel_raw["groups"]["right_block"]
+    del rubber_raw["bodies"][0], rubber_raw["initial"][0], rubber_raw["groups"]["left_block"]
+    steel, rubber = _sim(steel_raw, steps=60), _sim(rubber_raw, steps=60)
+    lo, hi = both.bodies[1].lo, both.bodies[1].hi
+    n = rubber.n_owned
+    assert hi - lo == n and both.bodies[0].hi == steel.n_owned
+    for name in ("u", "v", "F", "Xr"):
+        assert np.array_equal(getattr(both, name)[lo:hi], getattr(rubber, name)[:n]), name
+    assert np.array_equal(both.Xr[:lo], both.X[:lo])  # the steel block's reference stays
+    scale = np.abs(steel.u[: steel.n_owned]).max()
+    assert np.abs(both.u[:lo] - steel.u[:lo]).max() < 1e-10 * scale
+    assert np.abs(both.v[:lo] - steel.v[:lo]).max() < 1e-8 * np.abs(steel.v[:lo]).max()
+    d_both, d_rubber = both.diagnostics(), rubber.diagnostics()
+    for name in ("kinetic_energy", "strain_energy", "hourglass_energy"):
+        assert d_both[f"{name}.rubber"] == d_rubber[name]
+
+
 def test_bodies_within_a_kernel_support_are_not_neighbours():
     raw = _raw()
     raw["bodies"][1]["parts"][0]["lower"][0] = 0.1  # touching: one spacing between the lattices
@@ -80,8 +112,15 @@ def test_each_body_has_its_material_and_formulation():
 @pytest.mark.parametrize("change, message", [
     (lambda raw: raw.update(material={"model": "neo_hookean", "density": 1.0}), "remove the top-level [material]"),
     (lambda raw: raw["bodies"][1].update(name="steel"), "bodies[1].name must be a distinct identifier"),
-    (lambda raw: raw["bodies"][1]["formulation"].update(type="ulsph", update_every=5),
-     "'ulsph' and formulation.kernel = 'eulerian' need a scene of one body"),
+    (lambda raw: [raw["bodies"][0].update(formulation={"type": "ulsph", "update_every": 3}),
+                  raw["bodies"][1]["formulation"].update(type="ulsph", update_every=5)],
+     "bodies[1].formulation.update_every = 5: the bodies with an updated reference update it together"),
+    (lambda raw: [raw["bodies"][0].update(formulation={"type": "ulsph", "update_every": 3}),
+                  raw["bodies"][1]["formulation"].update(kernel="eulerian")],
+     "all type = 'ulsph' or all kernel = 'eulerian'"),
+    (lambda raw: [raw["bodies"][1]["formulation"].update(type="ulsph", update_every=3),
+                  raw["bodies"][0]["material"].update(failure_strain=0.1, break_pairs=True)],
+     "bodies[0].material.break_pairs cannot be used in a scene with a body of type = 'ulsph'"),
     (lambda raw: [raw["bodies"][0].update(formulation={"hessian": 0.3}),
                   raw["bodies"][1]["formulation"].update(type="tlsph", hessian=0.5)],
      "the bodies with Hessian stabilisation must share its value"),

@@ -421,8 +421,9 @@ def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body
                                                                              "formulation.update_every=3"]):
         scene = scene_from(text, form)  # with mirror images the lists are searched at each update
         assert config.search_every(scene["formulation"], bool(scene["symmetry"])) == 1
-    with pytest.raises(InputError, match="need a scene of one body"):
-        scene_from("two_blocks", ['bodies.1.formulation.kernel="eulerian"'])
+    with pytest.raises(InputError, match="all type = 'ulsph' or all kernel = 'eulerian'"):
+        scene_from("two_blocks", ['bodies.0.formulation.type="ulsph"', "bodies.0.formulation.update_every=1",
+                                  'bodies.1.formulation.kernel="eulerian"'])
 
 
 @pytest.mark.mpi

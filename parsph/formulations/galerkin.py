@@ -244,7 +244,8 @@ class GalerkinFormulation:
         runs = []
         for coupling in self.couplings:
             if coupling.points == "particles":
-                arrays, (lo, hi), fail = dict(fs=sim.fs, F=sim.F, Fr=sim.Fr if self.updated else sim.F, VP=sim.VP,
+                arrays, (lo, hi), fail = dict(fs=sim.fs if self.updated else sim.F, F=sim.F,
+                                              Fr=sim.Fr if self.updated else sim.F, VP=sim.VP,
                                               J=sim.J, psi=sim.psi), (body.lo, body.hi), sim.unstable_particle
             else:
                 A = sim.sets[coupling.points].arrays
@@ -279,7 +280,7 @@ class GalerkinFormulation:
         written = ("fs", "F", "VP", "J", "psi") + tuple(prefix + k for k in ("F", "VP", "J", "psi") if prefix)
         reads = tuple(("VP",) if self.points is None or self.type == "kbm" else ()) + \
             ((prefix + "VP",) if prefix else ())
-        return [Stage("kinematics+stress", displacement, writes=("d",))] * self.updated + [
+        return [Stage("kinematics+stress", displacement, writes=("d",))] * sim.updated + [
             Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
             Stage("forces", forces, reads=reads, writes=("f_int",), force_row=True)]
 

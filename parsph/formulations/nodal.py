@@ -87,7 +87,8 @@ class NodalFormulation:
         scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
         force_scratch = (np.empty(dim), np.empty(6), np.empty((3, 3)))
         out = []
-        if self.updated:
+        fs = sim.fs if self.updated else sim.F  # the motion from the reference: F itself in the initial one
+        if sim.updated:  # d apart from u: the displacement since each body's reference
             def displacement():
                 lo, hi = body.lo, body.hi
                 np.subtract(sim.u[lo:hi], sim.shift[lo:hi], out=sim.d[lo:hi])
@@ -124,7 +125,7 @@ class NodalFormulation:
             bad = self.kinematics_stress(
                 body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
                 sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
-                sim.fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch)
+                fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch)
             if bad >= 0:
                 raise sim.unstable_particle(bad)
         out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
@@ -138,7 +139,7 @@ class NodalFormulation:
         def forces():
             ref = sim.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
-                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, sim.fs, sim.VP, sim.B, sim.youngs,
+                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, fs, sim.VP, sim.B, sim.youngs,
                         sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.bound_hourglass, sim.omega_hg2,
                         *force_scratch)
         reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())

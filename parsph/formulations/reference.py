@@ -74,15 +74,17 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
     failed particles whose pairs are broken, materials.damage) of any, nor the pairs `cut`
     (neighbors.crossing: across a crack). The neighbours are
-    searched for, or, given a `skin` (an updated reference: one body, no pair breaking),
-    built by KeptPairs, which an Eulerian kernel keeps (`kept`, lists that much wider)
-    until a particle has moved half the skin: the same pairs in the same order. `tolerant`: owned rows left
+    searched for, or, given a `skin` (an updated reference: no pair breaking), built by
+    KeptPairs on lists that much wider, which are kept (`kept`) until a particle has moved
+    half the skin: the same pairs in the same order. `tolerant`: owned rows left
     with a singular correction matrix are listed in `bad` rather than raised."""
     corrected = np.array([o.corrected for o in options])
     if skin is not None or kept is not None:
         if kept is None:
-            kept = KeptPairs(find_pairs(X, support, gid, n_rows, skin), X.shape[1], kernel,
-                             (eta, weighted_hessian) if eta > 0 else None)
+            candidates = find_pairs(X, support, gid, n_rows, skin)
+            if len(options) > 1:
+                candidates = within_bodies(candidates, body)
+            kept = KeptPairs(candidates, X.shape[1], kernel, (eta, weighted_hessian) if eta > 0 else None)
         return _rebuilt(kept, X, measure, volume, support, gid, n_owned, body, options)
     pairs = find_pairs(X, support, gid, n_rows)
     if len(options) > 1:
@@ -144,21 +146,24 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
 
 def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np.ndarray,
              options: list) -> ReferenceData:
-    """The reference data of an updated reference (one body) from its KeptPairs (views of
-    their arrays, rebuilt in place at the next step of an Eulerian kernel)."""
+    """The reference data of an updated reference from its KeptPairs (views of their arrays,
+    rebuilt in place at the next update)."""
     rows = kept.candidates.n_rows
-    plain = np.full(rows, not options[0].corrected)
+    plain = ~np.array([o.corrected for o in options])[body[:rows]]
     min_spacing, stiffening = np.empty(n), np.ones(n)
     end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening)
     dim = X.shape[1]
     ptr, idx, dx, w = kept.ptr[: n + 1], kept.idx[:end], kept.dx[:end], kept.w[:end]
     hgc = hreg = np.zeros(0)
-    form = options[0].hourglass_form
-    if form:
+    if any(o.hourglass_form for o in options):
         hgc, hreg = np.zeros(end), np.zeros(end)
-        tlsph.hourglass_coefficients(form, ptr, idx, dx, w, kept.h[:end], volume, measure, float(options[0].alpha),
-                                     body[:n], 0, hgc, hreg)
+        for b, o in enumerate(options):
+            if o.hourglass_form:
+                tlsph.hourglass_coefficients(o.hourglass_form, ptr, idx, dx, w, kept.h[:end], volume, measure,
+                                             float(o.alpha), body[:n], b, hgc, hreg)
     stabilised = kept.eta > 0
+    if stabilised:
+        stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
         ptr=ptr, idx=idx, dx=dx, w=w, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
         hreg=hreg, q=kept.q[:end] if stabilised else np.zeros((0, dim)),
