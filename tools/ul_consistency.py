@@ -11,7 +11,7 @@ gradient of the UL positions (and their ratio), J_UL - J_TL (mean, 1st and 99th
 percentile) and where it is largest.
 The total-Lagrangian gradient means something only while the initial neighbours are still
 neighbours, i.e. before the distortion this formulation exists for: read it early on.
-Used for issue #6 (README, Known gaps).
+It measured the README's Known gap on the updated reference's consistency.
 
 usage: tools/ul_consistency.py runs/punch_ul.toml [--set KEY=VALUE ...] [--until T] [--every N]
 """
