@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import tomllib
-
 import numpy as np
 from mpi4py import MPI
 
-from parsph import config
-from parsph.build import build_local
+from parsph.api import build, load_scene
 from parsph.simulation import Simulation
 
 from conftest import RUNS
@@ -16,19 +13,11 @@ from conftest import RUNS
 
 def scene_from(name_or_text: str, overrides=()) -> dict:
     """Resolved scene from runs/NAME.toml or from TOML text, with `--set`-style overrides."""
-    if "\n" in name_or_text:
-        raw = tomllib.loads(name_or_text)
-    else:
-        with open(RUNS / f"{name_or_text}.toml", "rb") as fh:
-            raw = tomllib.load(fh)
-    for text in overrides:
-        config.apply_override(raw, *config.parse_override(text))
-    return config.validate(raw)
+    return load_scene(name_or_text if "\n" in name_or_text else RUNS / f"{name_or_text}.toml", overrides)
 
 
 def simulation(name_or_text: str, overrides=(), comm=MPI.COMM_SELF) -> Simulation:
-    scene = scene_from(name_or_text, overrides)
-    return Simulation(scene, build_local(scene, comm), comm)
+    return build(scene_from(name_or_text, overrides), comm)
 
 
 def run_until(sim: Simulation, end: float, every: int = 1, probe=None) -> dict:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import CEILING, ROOT, mpiexec
+from parsph.io import read_snapshots
 
 PLUGIN = ROOT / "tests" / "mpi" / "field_plugin.py"
 
@@ -72,9 +73,7 @@ def _plugin(args, ranks):
 
 
 def _snapshots(out):
-    with h5py.File(out / "snapshots.h5", "r") as f:
-        steps = sorted(k for k in f if k.startswith("step_"))
-        return [{k: f[s][k][()] for k in f[s]} for s in (steps[0], steps[-1])]
+    return [snapshot.fields for snapshot in read_snapshots(out, which=[0, -1])]
 
 
 @pytest.mark.mpi

@@ -3,11 +3,11 @@ and bit-identical histories (exact sums over particles and ranks, parsph.exact_s
 
 from __future__ import annotations
 
-import h5py
 import numpy as np
 import pytest
 
 from conftest import CEILING, RUNS, parsph
+from parsph.io import read_history, read_snapshots
 
 FIELDS = '["position","velocity","displacement","J","plastic_strain","rank"]'
 CASES = {
@@ -36,14 +36,11 @@ CASES = {
 
 
 def final_state(out):
-    with h5py.File(out / "snapshots.h5", "r") as f:
-        last = sorted(k for k in f if k.startswith("step_"))[-1]
-        return {name: f[last][name][()] for name in f[last]}
+    return read_snapshots(out, which=-1)[0].fields
 
 
 def history(out):
-    with h5py.File(out / "history.h5", "r") as f:
-        return {name: f[name][()] for name in f}
+    return read_history(out)
 
 
 @pytest.mark.mpi

@@ -48,7 +48,7 @@ def test_a_profiled_run_prints_the_stage_table_and_computes_the_same(tmp_path):
     flops_per_particle = float(rows["kinematics+stress"][2])
     assert flops_per_particle > 10  # the deformation gradient and the stress, at least
     assert "pairs per particle" in profiled.stdout
-    from parsph.io.history import read_history
+    from parsph.io import read_history
 
     a, b = read_history(str(tmp_path / "plain" / "history.h5")), read_history(str(tmp_path / "profiled" / "history.h5"))
     assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)

@@ -8,7 +8,6 @@ import random
 import re
 from fractions import Fraction
 
-import h5py
 import numpy as np
 import pytest
 
@@ -16,6 +15,7 @@ from conftest import BAR, parsph
 from physics import block_2d, simulation
 
 from parsph.exact_sum import Accumulator, Exact, allsum, sums, total
+from parsph.io import read_history, read_snapshots
 
 
 # ---- exact sums
@@ -188,14 +188,11 @@ def run_scene(tmp_path, name, text, ranks, *extra):
 
 
 def history(out) -> dict:
-    with h5py.File(out / "history.h5", "r") as f:
-        return {k: f[k][()] for k in f}
+    return read_history(out)
 
 
 def final_state(out) -> dict:
-    with h5py.File(out / "snapshots.h5", "r") as f:
-        last = sorted(k for k in f if k.startswith("step_"))[-1]
-        return {k: f[last][k][()] for k in ("position", "velocity", "J")}
+    return read_snapshots(out, ("position", "velocity", "J"), which=-1)[0].fields
 
 
 def assert_same_run(a, b):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import CEILING, ROOT, RUNS, kill_processes_mentioning, mpiexec, parsph, wait_for
+from parsph.io import read_history, read_snapshots
 
 FIELDS = '["position","velocity","J"]'
 PATCH = ["--set", f"output.snapshot_fields={FIELDS}", "--set", "output.history_every=10",
@@ -20,14 +21,12 @@ PATCH = ["--set", f"output.snapshot_fields={FIELDS}", "--set", "output.history_e
 
 
 def final(out, names=("position", "velocity", "J")):
-    with h5py.File(out / "snapshots.h5", "r") as f:
-        last = sorted(k for k in f if k.startswith("step_"))[-1]
-        return f[last].attrs["step"], {k: f[last][k][()] for k in names}
+    last = read_snapshots(out, names, which=-1)[0]
+    return last.step, last.fields
 
 
 def history(out):
-    with h5py.File(out / "history.h5", "r") as f:
-        return {k: f[k][()] for k in f}
+    return read_history(out)
 
 
 def run(out, ranks, *extra, scene="patch_random", env=None):

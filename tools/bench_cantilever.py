@@ -17,19 +17,17 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import time
 import tomllib
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from mpi4py import MPI  # noqa: E402
+from mpi4py import MPI
 
-from parsph import config  # noqa: E402
-from parsph.analytic import timoshenko_cantilever  # noqa: E402
-from parsph.build import build_local  # noqa: E402
-from parsph.simulation import Simulation  # noqa: E402
+from parsph import config
+from parsph.analytic import timoshenko_cantilever
+from parsph.build import build_local
+from parsph.simulation import Simulation
 
 METHODS = {
     "tlsph": ("corrected SPH, alpha = 50", ['formulation.type="tlsph"']),

@@ -76,7 +76,6 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
-sys.path.insert(0, ROOT)
 from mpi4py import MPI  # noqa: E402
 
 from parsph import config  # noqa: E402

@@ -66,25 +66,30 @@ from types import SimpleNamespace
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+from bench_cantilever import errors as cantilever_errors
+from mpi4py import MPI
+from rod_error import PAPER as ROD_PAPER
+from rod_error import rod_errors
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # bench_cantilever, rod_error
+from parsph import config
+from parsph.api import build, load_scene
+from parsph.analytic import bar_tip_displacement, cantilever_stiffness
+from parsph.build import build_local
+from parsph.errors import InputError, ParsphError
+from parsph.io.snapshots import SnapshotWriter
+from parsph.simulation import Simulation
 
-from bench_cantilever import errors as cantilever_errors  # noqa: E402
-from mpi4py import MPI  # noqa: E402
-from physics import scene_from, simulation  # noqa: E402
-from rod_error import PAPER as ROD_PAPER  # noqa: E402
-from rod_error import rod_errors  # noqa: E402
-
-from parsph import config  # noqa: E402
-from parsph.analytic import bar_tip_displacement, cantilever_stiffness  # noqa: E402
-from parsph.build import build_local  # noqa: E402
-from parsph.errors import InputError, ParsphError  # noqa: E402
-from parsph.io.snapshots import SnapshotWriter  # noqa: E402
-from parsph.simulation import Simulation  # noqa: E402
-
+RUNS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "runs")
 UL3 = ["formulation.type='ulsph'", "formulation.update_every=3"]
+
+
+def scene_from(name: str, overrides=()) -> dict:
+    """The resolved scene runs/NAME.toml with `--set`-style overrides."""
+    return load_scene(os.path.join(RUNS, f"{name}.toml"), overrides)
+
+
+def simulation(name: str, overrides=(), comm=MPI.COMM_SELF):
+    return build(scene_from(name, overrides), comm)
 VARIANTS = {  # name: (overrides, problems)
     "TL a=0": (["formulation.hourglass=0"], ("beam", "bar")),
     "TL a=50 paper": (["formulation.hourglass=50", "formulation.hourglass_form='paper'"], ("beam",)),

@@ -66,12 +66,12 @@ import sys
 import time
 import tomllib
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 # bench_lammps sets OMP_NUM_THREADS, NUMBA_NUM_THREADS, ... = 1 in os.environ on import
-from bench_lammps import DEFAULT_VENV, LAMMPS_VERSION, ensure_lammps, lammps_env  # noqa: E402
+from bench_lammps import DEFAULT_VENV, LAMMPS_VERSION, ensure_lammps, lammps_env  # noqa: I001
 
-import h5py  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+
+from parsph.io import read_history, read_snapshots
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 SCENE = os.path.join(ROOT, "runs", "taylor_impact.toml")
@@ -126,17 +126,14 @@ def run_parsph(sc: dict, out: str) -> dict:
     if proc.returncode != 0:
         sys.exit(f"parsph failed (exit {proc.returncode}): {' '.join(cmd)}\n{text[-3000:]}")
     loop = re.search(r"(\d+) steps to t = \S+ s in (\S+) s", text)
-    with h5py.File(os.path.join(out, "history.h5"), "r") as h:
-        steps = int(h["step"][-1])
-        t_end = float(h["time"][-1])
-        probe_length, probe_width = float(h["length"][-1]), float(h["width"][-1])
-    with h5py.File(os.path.join(out, "snapshots.h5"), "r") as s:
-        names = sorted(k for k in s if k.startswith("step_"))
-        if int(names[-1][5:]) != steps:
-            sys.exit(f"parsph's last snapshot is {names[-1]}, not the last step {steps}")
-        order0, order = np.argsort(s[names[0]]["gid"][:]), np.argsort(s[names[-1]]["gid"][:])
-        x0 = s[names[0]]["position"][:][order0, :2]
-        x = s[names[-1]]["position"][:][order, :2]
+    h = read_history(out)
+    steps, t_end = int(h["step"][-1]), float(h["time"][-1])
+    probe_length, probe_width = float(h["length"][-1]), float(h["width"][-1])
+    first, last = read_snapshots(out, ("gid", "position"), which=[0, -1])
+    if last.step != steps:
+        sys.exit(f"parsph's last snapshot is of step {last.step}, not the last step {steps}")
+    x0 = first["position"][np.argsort(first["gid"]), :2]
+    x = last["position"][np.argsort(last["gid"]), :2]
     top, row, foot = top_and_foot(x0, x, sc)
     if abs(top - probe_length) > 1e-12 and np.sum(np.isclose(x0[:, 1], x0[:, 1].max())) % 2:
         sys.exit(f"top-centre y {top} is not parsph's 'length' probe {probe_length}")

@@ -14,10 +14,10 @@ from __future__ import annotations
 import argparse
 import os
 
-import h5py
 import numpy as np
-
 from launch import ROOT, run_scene
+
+from parsph.io import read_history, read_snapshots
 
 SPEED, RAMP = 10.0, 1.0e-5  # the scene's pull speed and ramp
 CASES = (  # label, overrides
@@ -29,15 +29,14 @@ CASES = (  # label, overrides
 
 
 def measure(out: str) -> dict:
-    with h5py.File(os.path.join(out, "history.h5"), "r") as h:
-        t, force = h["time"][()], h["force"][()]
-        balance = np.abs(h["total_energy"][()]).max() / h["external_work"][()].max()
+    h = read_history(out)
+    t, force = h["time"], h["force"]
+    balance = np.abs(h["total_energy"]).max() / h["external_work"].max()
     peak = int(np.argmax(force))
     after = np.flatnonzero(force[peak:] < 0.5 * force[peak])
     failed_at = t[peak + after[0]] if len(after) else np.nan
-    with h5py.File(os.path.join(out, "snapshots.h5"), "r") as f:
-        last = f[sorted(k for k in f if k.startswith("step_"))[-1]]
-        x, u, D = last["position"][()], last["displacement"][()], last["damage"][()]
+    last = read_snapshots(out, ("position", "displacement", "damage"), which=-1)[0]
+    x, u, D = last["position"], last["displacement"], last["damage"]
     X = x - u
     failed = X[D >= 1.0, 0] * 1e3
     return {"particles": len(x), "peak": force[peak], "elongation": SPEED * (failed_at - 0.5 * RAMP) * 1e3,

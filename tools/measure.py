@@ -19,17 +19,17 @@ from __future__ import annotations
 
 import sys
 
-import h5py
 import numpy as np
 import scipy.sparse as sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from parsph.io import read_snapshots
+
 
 def snapshots(out: str):
-    with h5py.File(f"{out}/snapshots.h5", "r") as f:
-        for step in sorted(k for k in f if k.startswith("step_")):
-            yield f[step].attrs["time"], {name: f[step][name][()] for name in f[step]}
+    for snapshot in read_snapshots(out):
+        yield snapshot.time, snapshot.fields
 
 
 def rows(X: np.ndarray) -> tuple:

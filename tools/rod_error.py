@@ -19,13 +19,12 @@ import math
 import os
 import sys
 
-import h5py
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from parsph.analytic import driven_rod_velocity, free_rod_velocity  # noqa: E402
-from parsph.config import bodies  # noqa: E402
-from parsph.expressions import Field  # noqa: E402
+from parsph.analytic import driven_rod_velocity, free_rod_velocity
+from parsph.config import bodies
+from parsph.expressions import Field
+from parsph.io import read_snapshots
 
 # [R] Table 3 (the Gaussian): error at 0.0116 ms / 0.0231 ms
 PAPER = {"sph": (0.05026, 0.04999), "rlm": (0.01301, 0.01297), "kbm": (0.00813, 0.00842),
@@ -64,15 +63,12 @@ def snapshots(out: str) -> list:
     axial, _ = exact_axial(scene)
     dim = scene["scene"]["dimension"]
     rows = []
-    with h5py.File(os.path.join(out, "snapshots.h5"), "r") as f:
-        for name in sorted(k for k in f if k.startswith("step_")):
-            g = f[name]
-            t = float(g.attrs["time"])
-            if t > 0:
-                X = g["position"][:, :dim] - g["displacement"][()]
-                exact = np.zeros_like(X)  # and the velocity across is zero
-                exact[:, 0] = axial(X, g["gid"][()], t)
-                rows.append((t, X, g["velocity"][()], exact))
+    for snapshot in read_snapshots(out, ("position", "displacement", "gid", "velocity")):
+        if snapshot.time > 0:
+            X = snapshot["position"][:, :dim] - snapshot["displacement"]
+            exact = np.zeros_like(X)  # and the velocity across is zero
+            exact[:, 0] = axial(X, snapshot["gid"], snapshot.time)
+            rows.append((snapshot.time, X, snapshot["velocity"], exact))
     return rows
 
 

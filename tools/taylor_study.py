@@ -16,10 +16,10 @@ from __future__ import annotations
 import argparse
 import os
 
-import h5py
 import numpy as np
-
 from launch import ROOT, run_scene
+
+from parsph.io import read_history, read_snapshots
 
 CASES = (  # label, overrides
     ("0.35 mm", []),
@@ -31,12 +31,9 @@ CASES = (  # label, overrides
 
 
 def measure(out: str) -> dict:
-    with h5py.File(os.path.join(out, "history.h5"), "r") as h:
-        series = {k: h[k][()] for k in ("length", "total_energy", "kinetic_energy", "disorder")}
-    with h5py.File(os.path.join(out, "snapshots.h5"), "r") as f:
-        steps = sorted(k for k in f if k.startswith("step_"))
-        first, last = f[steps[0]]["position"][()], f[steps[-1]]
-        x, strain = last["position"][()], last["plastic_strain"][()]
+    series = read_history(out)
+    first_snapshot, last = read_snapshots(out, ("position", "plastic_strain"), which=[0, -1])
+    first, x, strain = first_snapshot["position"], last["position"], last["plastic_strain"]
     initial = series["kinetic_energy"][0]
     return {"particles": len(x), "length": series["length"].min() / first[:, 1].max(),
             "width": 2 * np.abs(x[:, 0]).max() * 1e3, "strain": strain.max(),

@@ -1,1 +1,6 @@
-"""Output files: history time series and particle snapshots."""
+"""Output files: history time series and particle snapshots, and reading them back
+(read_history, read_snapshots)."""
+
+from parsph.io.results import Snapshot, read_history, read_snapshots, snapshot_steps
+
+__all__ = ["Snapshot", "read_history", "read_snapshots", "snapshot_steps"]

@@ -108,12 +108,6 @@ class HistoryWriter:
             self.file.close()
 
 
-def read_history(path: str) -> dict:
-    """All series of a history file as numpy arrays."""
-    with h5py.File(path, "r") as f:
-        return {name: np.asarray(f[name]) for name in f}
-
-
 def read_units(path: str) -> dict:
     """The units attribute of every series of a history file."""
     with h5py.File(path, "r") as f:

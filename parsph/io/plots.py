@@ -8,7 +8,8 @@ import h5py
 import numpy as np
 
 from parsph.errors import InputError
-from parsph.io.history import read_history, read_units
+from parsph.io.history import read_units
+from parsph.io.results import read_history
 
 
 def _pyplot():
