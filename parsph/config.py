@@ -167,9 +167,11 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "viscosity": Key("float", 0.0, non_negative,
                          "Monaghan's artificial viscosity alpha (0: none; for fluids; particle formulations)"),
         "viscosity_beta": Key("float", 0.0, non_negative, "Monaghan's artificial viscosity beta"),
-        "plastic_hourglass": Key("bool", True, None,
-                                 "j2_plasticity: a yielded particle's hourglass modulus is its yield stress "
-                                 "instead of E [G §4.5] (false: E throughout)"),
+        "plastic_hourglass": Key("str", "yield_stress", one_of("yield_stress", "elastic", "viscous"),
+                                 "j2_plasticity, the hourglass force of a yielded particle: its yield stress "
+                                 "as modulus [G §4.5] (yield_stress), E throughout (elastic), or LAMMPS "
+                                 "MACHDYN's viscous force for a pair with a plastic strain above 1e-3 "
+                                 "(viscous; hourglass_form = 'paper')"),
     },
     "time": {
         "end": Key("float", REQUIRED, positive, "end time [s]"),
@@ -683,11 +685,25 @@ def substitute_parameters(raw: dict) -> dict:
     return walk(raw, "")
 
 
+def upgrade(scene: dict) -> None:
+    """Values of keys as scenes (and the scenes stored in checkpoints) wrote them before the
+    key took its present form, in place: formulation.plastic_hourglass true / false is
+    'yield_stress' / 'elastic'."""
+    tables = [scene.get("formulation")] + [b.get("formulation") for b in scene.get("bodies", ())
+                                           if isinstance(b, dict)]
+    for form in tables:
+        if isinstance(form, dict) and isinstance(form.get("plastic_hourglass"), bool):
+            form["plastic_hourglass"] = "yield_stress" if form["plastic_hourglass"] else "elastic"
+
+
 def _formulation(path: str, raw: Any, dim: int) -> dict:
     """A resolved formulation table: defaults by type, update triggers checked."""
     form = _table(path, raw, SECTIONS["formulation"], dim)
     if form["hourglass"] is None:
         form["hourglass"] = 50.0 if form["type"] in ("tlsph", "ulsph") else 0.0
+    if form["plastic_hourglass"] == "viscous" and not (form["hourglass"] > 0 and form["hourglass_form"] == "paper"):
+        raise InputError(f"{path}.plastic_hourglass = 'viscous' (LAMMPS MACHDYN's) needs the paper's hourglass "
+                         f"force: {path}.hourglass > 0 and {path}.hourglass_form = 'paper'")
     if form["type"] == "ulsph" and not (form["update_every"] or form["update_strain"]):
         raise InputError(f"{path}.type = 'ulsph' needs an update trigger: {path}.update_every "
                          f"(steps) or {path}.update_strain (log strain)")
@@ -823,6 +839,7 @@ def validate(raw: dict) -> dict:
     if not isinstance(raw, dict):
         raise InputError("a scene must be a TOML table")
     raw = substitute_parameters(raw)
+    upgrade(raw)
     for name in raw:
         if name not in TOP_LEVEL:
             raise InputError(f"unknown key '{name}'{_suggest(name, TOP_LEVEL)}")

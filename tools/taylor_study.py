@@ -26,7 +26,7 @@ CASES = (  # label, overrides
     ("0.175 mm", ["parameters.spacing=1.75e-4"]),
     ("0.117 mm", ["parameters.spacing=1.1666666666666667e-4"]),
     ("0.35 mm, alpha = 0", ["formulation.hourglass=0"]),
-    ("0.35 mm, E in hourglass", ["formulation.plastic_hourglass=false"]),
+    ("0.35 mm, E in hourglass", ["formulation.plastic_hourglass=elastic"]),
 )
 
 

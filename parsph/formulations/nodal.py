@@ -29,6 +29,7 @@ from parsph.fields import Field, register
 from parsph.formulations import tlsph
 from parsph.formulations.base import Stage
 from parsph.formulations.reference import PairOptions
+from parsph.kernels.functions import KERNEL_NAMES
 from parsph.materials import damage, elastoplastic, update
 
 TYPES = ("tlsph", "ulsph", "sph", "rlm")
@@ -53,7 +54,7 @@ class NodalFormulation:
         self.updated = self.type == "ulsph" or self.eulerian
         self.alpha = options["hourglass"]
         self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
-        self.plastic_hourglass = options["plastic_hourglass"]
+        self.plastic_hourglass = options["plastic_hourglass"]  # a yielded particle's: [G §4.5], E or MACHDYN's
         self.viscosity = (options["viscosity"], options["viscosity_beta"])  # Monaghan's alpha, beta
         self.eta = options["hessian"]
         self.weighted_hessian = options["hessian_correction"] == "weighted"
@@ -62,8 +63,9 @@ class NodalFormulation:
         force = "rlm" if self.type == "rlm" else options["force_form"]
         reference = tlsph.REFERENCE_CURRENT if self.eulerian else \
             tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
+        viscous = self.hourglass_form == tlsph.HOURGLASS_PAPER and self.plastic_hourglass == "viscous"
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
-            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, damaged)
+            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, damaged, viscous)
 
     @property
     def pair_options(self) -> PairOptions:
@@ -93,7 +95,8 @@ class NodalFormulation:
                 lo, hi = body.lo, body.hi
                 np.subtract(sim.u[lo:hi], sim.shift[lo:hi], out=sim.d[lo:hi])
             out.append(Stage("kinematics+stress", displacement, writes=("d",)))
-        plastic = self.plastic_hourglass and body.law.state == "plastic_state"
+        plastic = self.plastic_hourglass == "yield_stress" and body.law.state == "plastic_state"
+        viscous = self.plastic_hourglass == "viscous" and hourglass and body.law.state == "plastic_state"
         if hourglass and (plastic or body.failure_strain is not None):
             def hourglass_modulus():  # from the committed state: [G §4.5], and (1 - D) E
                 lo, hi = body.lo, body.hi
@@ -128,21 +131,30 @@ class NodalFormulation:
                 fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch)
             if bad >= 0:
                 raise sim.unstable_particle(bad)
+        states = ((body.law.state,) if body.law.state else ()) + (("damage",) if body.failure_strain is not None else ())
+        trials = tuple(name + "_trial" for name in states)  # the new states it computes
         out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
-                         writes=("fs", "F", "VP", "J", "psi", "hg_psi")))
+                         writes=("fs", "F", "VP", "J", "psi", "hg_psi") + trials))
         if hessian:
             def hessian_transpose():
                 ref = sim.ref
                 self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.VP, sim.B)
             out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",), force_row=True))
 
+        # MACHDYN's viscous hourglass force: alpha, the wave speed, density, E, the plastic strain's column
+        constants = np.array([self.alpha, body.constants.wave_speed, body.density, body.constants.youngs,
+                              elastoplastic.PLASTIC_STRAIN], float)
+        kind = KERNEL_NAMES.index(sim.scene["kernel"]["type"])
+
         def forces():
             ref = sim.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, fs, sim.VP, sim.B, sim.youngs,
                         sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.bound_hourglass, sim.omega_hg2,
-                        *force_scratch)
-        reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ())
+                        *force_scratch, sim.v, sim.material_state(body)[1] if viscous else sim.no_state,
+                        sim.support, kind, constants)
+        reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \
+            (("v", body.law.state + "_trial") if viscous else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2"), force_row=True))
         if any(self.viscosity):

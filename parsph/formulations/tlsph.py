@@ -57,6 +57,7 @@ from numba import njit
 
 from parsph import COMPILED_SOURCE
 from parsph.formulations.base import CompiledOnce
+from parsph.kernels.functions import value_and_slope
 from parsph.materials import damage, update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
@@ -73,15 +74,19 @@ HOURGLASS_FORMS = {"paper": HOURGLASS_PAPER, "variational": HOURGLASS_VARIATIONA
 # with this factor both stiffen the beam of [G §4.2] alike at the same alpha (compliance
 # error +4 % / +1.6 % at n = 8, about 0 / -0.2 % at n = 16, variational / paper form).
 VARIATIONAL_SCALE = 0.2
+# LAMMPS MACHDYN's switch to its viscous hourglass force: a pair of which a particle's
+# equivalent plastic strain exceeds this
+VISCOUS_ONSET = 1.0e-3
 
 
 @functools.lru_cache(maxsize=None)
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
-                   hessian: bool = False, damaged: bool = False):
+                   hessian: bool = False, damaged: bool = False, viscous: bool = False):
     """(gradient, kinematics_stress, hessian_transpose, forces) for one body's switches:
     dimension, material law (materials.update), force row, hourglass form, reference
     (REFERENCE_*), Hessian stabilisation, tensile damage (materials.damage: only the stages of a
-    damaged body compile it). Each stage works on the owned rows lo..hi-1.
+    damaged body compile it), and with the paper's hourglass form LAMMPS MACHDYN's viscous
+    hourglass force for yielded pairs (`viscous`). Each stage works on the owned rows lo..hi-1.
 
     The switches are closure constants, so branches on them are folded away by the
     compiler. The stage bodies are written out here rather than inlined from module-level
@@ -156,10 +161,19 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
 
     @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor):
+               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
-        frequency (see `stable_time_step`). With
+        frequency (see `stable_time_step`). With `viscous`, a pair of which a particle's
+        equivalent plastic strain (column vc[4] of `plastic`, the state just computed)
+        exceeds VISCOUS_ONSET takes LAMMPS MACHDYN's viscous hourglass force instead of the
+        spring: with gamma = (F_i + F_j) X_ij / 2 - x_ij, r = |x_ij|, h the mean support,
+        v = x_ij . v_ij / (r + h/10) limited to 1 % of the wave speed c0, when
+        v gamma . x_ij < 0,
+            f_i += m_i m_j (-e alpha c0 mu / rho0) W'(|X_ij|) x_ij / (r + h/100),
+            mu = h v / (r + h/10),  e = max(|gamma| / |X_ij|, 0.05),
+        an artificial viscosity on the hourglass mode's closing (vc = alpha, c0, rho0, E,
+        column; scaled by E_i E_j / E^2, the damage's factors). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -221,7 +235,32 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                             fj += fs[j, a, b] * dx[p, b]
                         di += (fi - xij[a]) * xij[a]
                         dj += (fj - xij[a]) * xij[a]
-                    if r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
+                    if viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET:
+                        h = 0.5 * (support[i] + support[j])
+                        r0 = 0.0
+                        err2 = 0.0
+                        closing = 0.0
+                        approach = 0.0
+                        for a in range(dim):
+                            fi = 0.0
+                            for b in range(dim):
+                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * dx[p, b]
+                            gamma = fi - xij[a]
+                            err2 += gamma * gamma
+                            closing += gamma * xij[a]
+                            approach += xij[a] * (v[j, a] - v[i, a])
+                            r0 += dx[p, a] * dx[p, a]
+                        r0 = math.sqrt(r0)
+                        approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
+                        if approach * closing < 0.0:
+                            mu = h * approach / (r + 0.1 * h)
+                            mag = -max(math.sqrt(err2) / r0, 0.05) * vc[0] * vc[1] * mu / vc[2]
+                            slope = value_and_slope(kind, r0, h, dim)[1]
+                            c = mass[i] * mass[j] * mag * slope / (r + 0.01 * h) * (youngs[i] / vc[3]) * (
+                                youngs[j] / vc[3])
+                            for a in range(dim):
+                                f_hg[i, a] += c * xij[a]
+                    elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
                         for a in range(dim):
                             f_hg[i, a] += c * xij[a]
@@ -246,7 +285,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
-    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {reference} {hessian} {damaged}"
+    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {reference} {hessian} {damaged} {viscous}"
     return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
 
 

@@ -21,6 +21,7 @@ scene.
 
 from __future__ import annotations
 
+import copy
 import glob
 import hashlib
 import json
@@ -300,6 +301,8 @@ def physics_changes(old_scene: dict, scene: dict) -> list:
 
 def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
     """Refuse a restart whose scene changes the physics of the checkpointed run."""
+    old_scene = copy.deepcopy(old_scene)
+    config.upgrade(old_scene)  # as a scene of today states it
     changed = physics_changes(old_scene, scene)
     if changed:
         raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
