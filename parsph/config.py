@@ -19,51 +19,12 @@ import re
 import stat
 import sys
 import tomllib
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from parsph import expressions, quantities
 from parsph.errors import InputError
+from parsph.keys import REQUIRED, Key, in_range, non_negative, one_of, positive
 from parsph.materials import LAW_KEYS, LAWS, constants
-
-REQUIRED = object()
-
-
-@dataclass(frozen=True)
-class Key:
-    """One scene key: its type, default (or REQUIRED) and an optional value check."""
-
-    kind: str  # "int" | "float" | "str" | "bool" | "vector" | "matrix" | "intlist" | "strlist" | "table"
-    default: Any = None
-    check: Callable[[Any], str | None] | None = None
-    doc: str = ""
-
-
-def positive(v):
-    return None if v > 0 else "must be > 0"
-
-
-def non_negative(v):
-    return None if v >= 0 else "must be >= 0"
-
-
-def one_of(*choices):
-    def check(v):
-        return None if v in choices else f"must be one of {', '.join(map(repr, choices))}"
-
-    return check
-
-
-def in_range(lo, hi, lo_open=False, hi_open=False):
-    def check(v):
-        ok_lo = v > lo if lo_open else v >= lo
-        ok_hi = v < hi if hi_open else v <= hi
-        if ok_lo and ok_hi:
-            return None
-        return f"must be in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
-
-    return check
-
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = tuple(LAWS)
@@ -104,18 +65,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
     "material": {
         "model": Key("str", REQUIRED, one_of(*MATERIALS)),
         "density": Key("float", REQUIRED, positive, "reference density [kg/m^3]"),
-        "youngs_modulus": Key("float", None, positive, "[Pa]"),
-        "poisson_ratio": Key("float", None, in_range(-1.0, 0.5, True, True)),
-        "shear_modulus": Key("float", None, positive, "[Pa]"),
-        "bulk_modulus": Key("float", None, positive, "[Pa]"),
-        "c1": Key("float", None, positive, "mooney_rivlin: c1 of [R eq. 18] [Pa]"),
-        "c2": Key("float", None, non_negative, "mooney_rivlin: c2 of [R eq. 18] [Pa]"),
-        "lambda": Key("float", None, positive, "mooney_rivlin: lambda of [R eq. 18] [Pa]"),
-        "tait_b": Key("float", None, positive, "tait_fluid: B of p = B ((rho/rho0)^gamma - 1) [R eq. 77] [Pa]"),
-        "tait_gamma": Key("float", None, positive, "tait_fluid: gamma of [R eq. 77]"),
-        "yield_stress": Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
-        "hardening_modulus": Key("float", None, None, "j2_plasticity: H = d sigma_Y / d eps_bar, negative "
-                                 "for softening (default 0: perfectly plastic) [Pa]"),
+        **LAW_KEYS,  # each law's constants (materials.LAWS)
         "failure_strain": Key("float", None, positive,
                               "tensile damage [G eq. 45-46]: damage grows while the largest principal log "
                               "strain exceeds this (default: no damage; solids, particle formulations)"),
@@ -429,8 +379,8 @@ def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts") -> list[
 
 
 def _validate_material(path: str, mat: dict) -> None:
-    """The law's constants given, and no constant it does not take; a softening slower than
-    the elastic shear stiffness (3 mu + H > 0, else the return mapping has no unique solution)."""
+    """The law's constants given, no constant it does not take, finite moduli, and the
+    law's own checks."""
     law = LAWS[mat["model"]]
     for k in law.takes:
         if mat[k] is None:
@@ -450,11 +400,8 @@ def _validate_material(path: str, mat: dict) -> None:
                               and math.isfinite(speed) and speed > 0.0):
         raise InputError(f"{path}: the moduli or the P-wave speed sqrt((lambda + 2 mu) / density) = {speed:g} m/s "
                          f"are not finite positive numbers in double precision ({given})")
-    if law.name == "j2_plasticity" and mat["hardening_modulus"] is not None:
-        mu = mat["youngs_modulus"] / (2.0 * (1.0 + mat["poisson_ratio"]))
-        if not 3.0 * mu + mat["hardening_modulus"] > 0.0:
-            raise InputError(f"{path}.hardening_modulus = {mat['hardening_modulus']:g} softens faster than the "
-                             f"elastic shear stiffness allows: it must be > -3 mu = {-3.0 * mu:g} Pa")
+    if law.check:
+        law.check(path, mat)
 
 
 def _validate_groups(raw: Any, dim: int) -> dict:
@@ -877,7 +824,7 @@ def validate(raw: dict) -> dict:
     _validate_lists(scene, raw, dim)
     for body in bodies(scene):
         if body["material"]["failure_strain"] is not None and (
-                body["material"]["model"] == "tait_fluid" or body["formulation"]["type"] in ("kbm", "efg")):
+                LAWS[body["material"]["model"]].fluid or body["formulation"]["type"] in ("kbm", "efg")):
             raise InputError(f"material.failure_strain: damage is for solids computed at the particles "
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")

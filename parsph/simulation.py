@@ -40,7 +40,7 @@ from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import galerkin, reference, tlsph
 from parsph.formulations.nodal import NodalFormulation
-from parsph.materials import damage, elastoplastic, update
+from parsph.materials import damage, update
 from parsph.neighbors import crossing, find_pairs, pair_keys
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
 from parsph.parallel.mirrors import add_images
@@ -362,10 +362,9 @@ class Simulation:
         work = state[:, damage.WORK].copy()
         F_old = self.F[:n].copy()
         self.compute_forces()
-        plastic = [b for b in self.bodies if b.law.state == "plastic_state" and not b.rigid]
+        plastic = [b for b in self.bodies if b.law.plastic and not b.rigid]
         for b in plastic:  # their elastic state (stress) is kept: the plastic metric takes the change of F
-            elastoplastic.keep_elastic_state(self.material_state(b)[0][b.lo:b.hi], F_old[b.lo:b.hi],
-                                             self.F[b.lo:b.hi])
+            b.law.plastic.keep_elastic(self.material_state(b)[0][b.lo:b.hi], F_old[b.lo:b.hi], self.F[b.lo:b.hi])
         if plastic:
             self.compute_forces()
         for b in self.bodies:
@@ -939,10 +938,8 @@ class Simulation:
             return self.von_mises(sel)
         if name == "cauchy_stress":
             return self.cauchy_stress(sel)
-        if name == "plastic_strain":
-            return self.plastic(sel, elastoplastic.PLASTIC_STRAIN)
-        if name == "plastic_work":
-            return self.plastic(sel, elastoplastic.PLASTIC_WORK)
+        if name in ("plastic_strain", "plastic_work"):
+            return self.plastic(sel, name.removeprefix("plastic_"))
         if name == "damage":
             out = np.zeros(len(sel))
             for b in self.bodies:
@@ -1011,13 +1008,14 @@ class Simulation:
             P[rows] = part
         return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
 
-    def plastic(self, sel: np.ndarray, column: int) -> np.ndarray:
-        """A column of the elasto-plastic state at the owned particles `sel` (0 for other laws)."""
+    def plastic(self, sel: np.ndarray, what: str) -> np.ndarray:
+        """The equivalent plastic strain ("strain") or the plastic work per unit reference
+        volume ("work") at the owned particles `sel` (0 for the laws without plasticity)."""
         out = np.zeros(len(sel))
         for b in self.bodies:
-            if b.law.state == "plastic_state":
+            if b.law.plastic:
                 rows = np.flatnonzero(self.body[sel] == b.index)
-                out[rows] = self.material_state(b)[1][sel[rows], column]
+                out[rows] = self.material_state(b)[1][sel[rows], getattr(b.law.plastic, what)]
         return out
 
     def von_mises(self, sel: np.ndarray) -> np.ndarray:
@@ -1041,8 +1039,8 @@ class Simulation:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
             out["strain"].append([b.formulation.integrated(self, b, lambda A: A["psi"])])
-            out["plastic"].append([] if b.law.state != "plastic_state" else [b.formulation.integrated(
-                self, b, lambda A: A["plastic_state_trial"][:, elastoplastic.PLASTIC_WORK])])
+            out["plastic"].append([] if not b.law.plastic else [b.formulation.integrated(
+                self, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work])])
             out["damage"].append([] if b.failure_strain is None else [self.volume[lo:hi] * self._damage_work(b)])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([self.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
@@ -1056,8 +1054,8 @@ class Simulation:
         beyond their strain energy and, with a plastic law, their plastic work (counted as such)."""
         lo, hi = b.lo, b.hi
         out = self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi]
-        if b.law.state == "plastic_state":
-            out = out - self.material_state(b)[1][lo:hi, elastoplastic.PLASTIC_WORK]
+        if b.law.plastic:
+            out = out - self.material_state(b)[1][lo:hi, b.law.plastic.work]
         return out
 
     def energy_sums(self) -> dict:

@@ -30,7 +30,7 @@ from parsph.formulations import tlsph
 from parsph.formulations.base import Stage
 from parsph.formulations.reference import PairOptions
 from parsph.kernels.functions import KERNEL_NAMES
-from parsph.materials import damage, elastoplastic, update
+from parsph.materials import damage, update
 
 TYPES = ("tlsph", "ulsph", "sph", "rlm")
 
@@ -95,15 +95,16 @@ class NodalFormulation:
                 lo, hi = body.lo, body.hi
                 np.subtract(sim.u[lo:hi], sim.shift[lo:hi], out=sim.d[lo:hi])
             out.append(Stage("kinematics+stress", displacement, writes=("d",)))
-        plastic = self.plastic_hourglass == "yield_stress" and body.law.state == "plastic_state"
-        viscous = self.plastic_hourglass == "viscous" and hourglass and body.law.state == "plastic_state"
+        plastic = self.plastic_hourglass == "yield_stress" and body.law.plastic is not None
+        viscous = self.plastic_hourglass == "viscous" and hourglass and body.law.plastic is not None
         if hourglass and (plastic or body.failure_strain is not None):
             def hourglass_modulus():  # from the committed state: [G §4.5], and (1 - D) E
                 lo, hi = body.lo, body.hi
                 modulus = np.full(hi - lo, body.constants.youngs)
-                if plastic:
-                    modulus = elastoplastic.hourglass_modulus(body.constants.values,
-                                                              sim.material_state(body)[0][lo:hi], modulus)
+                if plastic:  # a yielded point's yield stress in place of E
+                    state = sim.material_state(body)[0][lo:hi]
+                    modulus = np.where(state[:, body.law.plastic.strain] > 0.0,
+                                       body.law.plastic.yield_stress(body.constants.values, state), modulus)
                 if body.failure_strain is not None:
                     modulus *= damage.hourglass_factor(sim.damage_state(body)[0][lo:hi])
                 if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
@@ -143,7 +144,7 @@ class NodalFormulation:
 
         # MACHDYN's viscous hourglass force: alpha, the wave speed, density, E, the plastic strain's column
         constants = np.array([self.alpha, body.constants.wave_speed, body.density, body.constants.youngs,
-                              elastoplastic.PLASTIC_STRAIN], float)
+                              body.law.plastic.strain if viscous else 0], float)
         kind = KERNEL_NAMES.index(sim.scene["kernel"]["type"])
 
         def forces():

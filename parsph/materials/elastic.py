@@ -11,20 +11,17 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
+
+from parsph.keys import Key, in_range, non_negative, positive
+from parsph.materials.law import Constants, Law, moduli
 
 SAINT_VENANT_KIRCHHOFF = 0
 NEO_HOOKEAN = 1
 NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE = 2
 MOONEY_RIVLIN = 3
 TAIT_FLUID = 4
-MODEL_IDS = {
-    "saint_venant_kirchhoff": SAINT_VENANT_KIRCHHOFF,
-    "neo_hookean": NEO_HOOKEAN,
-    "neo_hookean_nearly_incompressible": NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE,
-    "mooney_rivlin": MOONEY_RIVLIN,
-    "tait_fluid": TAIT_FLUID,
-}
 
 
 @njit(cache=True, inline="always")
@@ -206,3 +203,50 @@ def symmetric_extremes(C, dim):
     r = max(-1.0, min(1.0, det(C, 3) / (2.0 * p ** 3)))
     phi = math.acos(r) / 3.0
     return q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0), q + 2.0 * p * math.cos(phi)
+
+
+# ------------------------------------------------------------------ the laws' declarations
+
+ISOTROPIC_KEYS = {"youngs_modulus": Key("float", None, positive, "[Pa]"),
+                  "poisson_ratio": Key("float", None, in_range(-1.0, 0.5, True, True))}
+
+
+def isotropic(material: dict, extra: tuple = ()) -> Constants:
+    """Constants (lambda, mu, K, *extra) from Young's modulus and Poisson's ratio."""
+    youngs, nu = material["youngs_modulus"], material["poisson_ratio"]
+    lam = youngs * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = youngs / (2 * (1 + nu))
+    k = lam + 2.0 * mu / 3.0
+    return Constants(values=np.array((lam, mu, k) + extra), lam=lam, mu=mu, bulk=k, youngs=youngs,
+                     wave_speed=math.sqrt((lam + 2 * mu) / material["density"]))
+
+
+def _nearly_incompressible_constants(m: dict) -> Constants:
+    mu, k = m["shear_modulus"], m["bulk_modulus"]
+    return moduli((k - 2.0 * mu / 3.0, mu, k), mu, k, m["density"])
+
+
+def _mooney_rivlin_constants(m: dict) -> Constants:  # psi = lambda (ln J)^2 under dilation: K = 2 lambda
+    return moduli((m["lambda"], m["c1"], m["c2"]), m["c1"] + m["c2"], 2.0 * m["lambda"], m["density"])
+
+
+def _tait_constants(m: dict) -> Constants:  # dp / d(rho / rho0) = gamma B at rest; no shear stiffness
+    return moduli((m["tait_b"], m["tait_gamma"], 0.0), 0.0, m["tait_gamma"] * m["tait_b"], m["density"])
+
+
+LAWS = (
+    Law("saint_venant_kirchhoff", SAINT_VENANT_KIRCHHOFF, ISOTROPIC_KEYS, isotropic, doc="[G eq. 19]"),
+    Law("neo_hookean", NEO_HOOKEAN, ISOTROPIC_KEYS, isotropic, doc="[G eq. 44]"),
+    Law("neo_hookean_nearly_incompressible", NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE,
+        {"shear_modulus": Key("float", None, positive, "[Pa]"), "bulk_modulus": Key("float", None, positive, "[Pa]")},
+        _nearly_incompressible_constants, doc="[V §2.4.1]"),
+    Law("mooney_rivlin", MOONEY_RIVLIN,
+        {"c1": Key("float", None, positive, "mooney_rivlin: c1 of [R eq. 18] [Pa]"),
+         "c2": Key("float", None, non_negative, "mooney_rivlin: c2 of [R eq. 18] [Pa]"),
+         "lambda": Key("float", None, positive, "mooney_rivlin: lambda of [R eq. 18] [Pa]")},
+        _mooney_rivlin_constants, doc="[R eq. 18]"),
+    Law("tait_fluid", TAIT_FLUID,
+        {"tait_b": Key("float", None, positive, "tait_fluid: B of p = B ((rho/rho0)^gamma - 1) [R eq. 77] [Pa]"),
+         "tait_gamma": Key("float", None, positive, "tait_fluid: gamma of [R eq. 77]")},
+        _tait_constants, fluid=True, doc="[R eq. 77]"),
+)

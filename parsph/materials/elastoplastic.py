@@ -29,7 +29,11 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.materials.elastic import det, inverse
+from parsph.errors import InputError
+from parsph.fields import Field, register
+from parsph.keys import Key, positive
+from parsph.materials.elastic import ISOTROPIC_KEYS, det, inverse, isotropic
+from parsph.materials.law import Law, Plastic
 
 COLUMNS = 8  # (C^p)^-1 in 6 columns, eps_bar, w_p
 WORK = 7  # scratch 3x3 matrices of the update
@@ -178,11 +182,9 @@ def j2(F, dim, c, state, trial, i, P, work):
     return psi
 
 
-def hourglass_modulus(c: np.ndarray, state: np.ndarray, youngs: float) -> np.ndarray:
-    """[G §4.5]: a point that has yielded uses its yield stress in place of E in the
-    hourglass force, one that has not keeps E (from the committed state of each row)."""
-    eps_bar = state[:, PLASTIC_STRAIN]
-    return np.where(eps_bar > 0.0, np.maximum(c[3] + c[4] * eps_bar, 0.0), youngs)
+def yield_stress(c: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """The current yield stress of each row of `state` (committed or trial)."""
+    return np.maximum(c[3] + c[4] * state[:, PLASTIC_STRAIN], 0.0)
 
 
 def keep_elastic_state(state: np.ndarray, F_old: np.ndarray, F_new: np.ndarray) -> None:
@@ -200,3 +202,29 @@ def keep_elastic_state(state: np.ndarray, F_old: np.ndarray, F_new: np.ndarray) 
     M = np.einsum("nab,nbc,ndc->nad", A, M, A)
     for k, (a, b) in enumerate(SYMMETRIC_PAIRS):
         state[:, k] = M[:, a, b]
+
+
+def _check(path: str, material: dict) -> None:
+    """A softening slower than the elastic shear stiffness (3 mu + H > 0, else the return
+    mapping has no unique solution)."""
+    if material["hardening_modulus"] is not None:
+        mu = material["youngs_modulus"] / (2.0 * (1.0 + material["poisson_ratio"]))
+        if not 3.0 * mu + material["hardening_modulus"] > 0.0:
+            raise InputError(f"{path}.hardening_modulus = {material['hardening_modulus']:g} softens faster than "
+                             f"the elastic shear stiffness allows: it must be > -3 mu = {-3.0 * mu:g} Pa")
+
+
+J2_PLASTICITY = 5
+LAW = Law(
+    "j2_plasticity", J2_PLASTICITY,
+    dict(ISOTROPIC_KEYS, yield_stress=Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
+         hardening_modulus=Key("float", None, None, "j2_plasticity: H = d sigma_Y / d eps_bar, negative for "
+                               "softening (default 0: perfectly plastic) [Pa]")),
+    lambda m: isotropic(m, (m["yield_stress"], m.get("hardening_modulus") or 0.0)),
+    optional=("hardening_modulus",), state="plastic_state", check=_check, doc="[G §4.5], [R §9.5]",
+    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state))
+# the elasto-plastic state, wherever the law's stress is evaluated
+for _points in ("particles", "stress_points", "gauss_points"):
+    register(Field("plastic_state", "state", owner="j2_plasticity", points=_points, columns=COLUMNS,
+                   initial=lambda X, gid: initial_state(len(X)),
+                   doc="committed (C^p)^-1, equivalent plastic strain and plastic work per volume"))

@@ -11,7 +11,7 @@ the stress again at the same F (a restart, a reference update) gives the same re
 `work` is scratch space, (WORK, 3, 3), allocated once per stage. `stiffening` is the
 factor on the reference P-wave speed squared that the stable time step uses. `law` is a
 compile-time constant of the calling stage, so the branch below is folded away: each
-stage holds only its law's code. A new law family adds one branch here and its entry in
+stage holds only its law's code. A new law family adds one branch here and its line in
 materials.LAWS.
 """
 
@@ -24,12 +24,13 @@ from numba import njit
 
 from parsph.materials import elastic, elastoplastic
 
-J2_PLASTICITY = 5
 WORK = elastoplastic.WORK  # the most scratch matrices a law uses
+J2_PLASTICITY = elastoplastic.J2_PLASTICITY
 
 
 @njit(cache=True, inline="always")
 def update(law, F, dim, c, state, trial, i, P, work):
+    """One branch per law family (the hyperelastic laws share one)."""
     if law == J2_PLASTICITY:
         return elastoplastic.j2(F, dim, c, state, trial, i, P, work)
     return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
