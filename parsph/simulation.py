@@ -122,7 +122,7 @@ class Simulation:
             float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
             config.search_every(kept, bool(scene["symmetry"])))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
-        owners = {f.type for f in forms} | {b.law.name for b in self.bodies}
+        owners = {f.type for f in forms} | {b.law.name for b in self.bodies} | {b.law.state for b in self.bodies}
         if self.updated:
             owners.add("updated")
         if any(b.failure_strain is not None for b in self.bodies):
@@ -136,6 +136,7 @@ class Simulation:
         self.damping = scene["time"]["damping"]
         self.t = restart["clock"]["t"] if restart else 0.0  # the constraints in force depend on it
         self.step_count = 0
+        self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
         self.updates = 0  # reference updates so far
         self.since_update = 0  # steps since the last one
         # running totals of the work done on this rank's particles of each body, exact (exact_sum)
@@ -155,6 +156,7 @@ class Simulation:
         if restart is not None:
             clock, carried = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
+            self.step_dt = clock.get("step_dt", 0.0)
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 for name, accs in self.totals.items():
@@ -386,7 +388,8 @@ class Simulation:
         carries, work arrays and halo plan; each body's rows of it."""
         dim, fl = self.dim, local.fields
         rows = local.n_owned + local.n_ghost
-        owners = {b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies}
+        owners = {b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies} | \
+            {b.law.state for b in self.bodies}
         carried = fields.carried(owners | ({"updated"} if self.updated else set()), name)
         arrays = self._with_trials({field: self._initial(field, fl, rows, name) for field in carried}, name)
         arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
@@ -708,6 +711,7 @@ class Simulation:
             v_half, u_drift = self.v[:n].copy(), self.u[:n].copy()
             self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
             contact = (v_half, self.v[:n] - v_half, self.u[:n] - u_drift)
+        self.step_dt = dt
         self.compute_forces(move_reference=self.eulerian)
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t)
@@ -912,8 +916,8 @@ class Simulation:
             "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in self.point_sets()[1:]},
             "totals": {**totals, "wall_force": self.wall_forces().tolist(),
                        "rigid": [body.state() for body in self.rigid_bodies]},
-            "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "updates": self.updates,
-                      "since_update": self.since_update, "first_stable": self._first_stable},
+            "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "step_dt": self.step_dt,
+                      "updates": self.updates, "since_update": self.since_update, "first_stable": self._first_stable},
         }
 
     # ----------------------------------------------------------------- read-outs
@@ -1000,7 +1004,7 @@ class Simulation:
             state = np.ascontiguousarray(self.material_state(b)[0][sel[rows]]) if b.law.state else self.no_state
             part = np.empty_like(F[rows])
             update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), d, b.constants.values, state,
-                            state.copy(), part, np.empty(len(rows)))
+                            state.copy(), part, np.empty(len(rows)), self.step_dt)
             if b.failure_strain is not None:
                 damage.degraded_stresses(part, np.ascontiguousarray(F[rows]), d,
                                          np.ascontiguousarray(self.damage_state(b)[0][sel[rows]]),

@@ -265,7 +265,7 @@ class GalerkinFormulation:
                 bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.d,
                                              weight, c, *sim.material_state(body, points), arrays["fs"],
                                              arrays["F"], arrays["Fr"], arrays["VP"], arrays["J"], arrays["psi"],
-                                             *scratch)
+                                             *scratch, sim.step_dt)
                 if bad >= 0:
                     raise fail(bad)
 
@@ -323,7 +323,7 @@ def compile_stages(dim: int, law: int, eulerian: bool = False):
     (the initial one, or the current one of the Eulerian kernel)."""
     reference = tlsph.REFERENCE_CURRENT if eulerian else tlsph.REFERENCE_INITIAL
     @njit(cache=True, _nrt=False)
-    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi, P, work):
+    def kinematics_stress(lo, hi, ptr, idx, G, base, d, weight, c, state, trial, fs, F, Fr, VP, J, psi, P, work, dt):
         """F = I + sum_J (d_J - d_base) (x) G_J, the stress, w P, J and psi at integration
         points lo..hi-1; returns the first inverted point or -1. With the Eulerian kernel
         that gradient is the motion fs from the last reference, F = fs F^r, and the forces,
@@ -335,7 +335,7 @@ def compile_stages(dim: int, law: int, eulerian: bool = False):
         for q in range(lo, hi):
             gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
             bad = stress_at(dim, law, reference, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
-                            work, F, VP, J, psi)
+                            work, F, VP, J, psi, dt)
             if bad and first_bad < 0:
                 first_bad = q
         return first_bad

@@ -129,10 +129,11 @@ class NodalFormulation:
             bad = self.kinematics_stress(
                 body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
                 sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
-                fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch)
+                fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch, sim.step_dt)
             if bad >= 0:
                 raise sim.unstable_particle(bad)
-        states = ((body.law.state,) if body.law.state else ()) + (("damage",) if body.failure_strain is not None else ())
+        states = tuple(name for name in (body.law.state, "damage" if body.failure_strain is not None else None)
+                       if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
         out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
                          writes=("fs", "F", "VP", "J", "psi", "hg_psi") + trials))

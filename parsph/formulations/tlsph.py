@@ -103,7 +103,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
 
     @njit(cache=True, _nrt=False)
     def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
-                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err):
+                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial) and (variational form)
         hourglass penalty hg_psi; returns the first inverted particle or -1."""
@@ -123,7 +123,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             else:
                 gradient_row(dim, i, i, ptr, idx, g, d, fs)
             if stress_at(dim, law, reference, damaged, i, fs, Fr, volume[i], c, state, trial, damage_state,
-                         damage_trial, P, work, F, VP, J, psi) and first_bad < 0:
+                         damage_trial, P, work, F, VP, J, psi, dt) and first_bad < 0:
                 first_bad = i
             if hourglass == HOURGLASS_VARIATIONAL:
                 # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
@@ -305,7 +305,7 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 @njit(cache=True, inline="always")
 def stress_at(dim, law, reference, with_damage, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F,
-              VP, J, psi):
+              VP, J, psi, dt):
     """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
     updated or current reference, the material update (new state in trial[i]), its damage
     (materials.damage, if with_damage), J, psi and VP[i] = w P, or w P F^rT =
@@ -325,7 +325,7 @@ def stress_at(dim, law, reference, with_damage, i, fs, Fr, w, c, state, trial, d
     if broken:  # failed: no stress, the law is not evaluated
         e = damage.failed(F[i], dim, damaged, damaged_trial, i, P)
     else:
-        e = update.update(law, F[i], dim, c, state, trial, i, P, work)
+        e = update.update(law, F[i], dim, c, state, trial, i, P, work, dt)
         if with_damage:
             damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
     J[i] = det(F[i], dim)

@@ -111,19 +111,20 @@ def _sandwich(A, B, out):
             out[a, b] = out[b, a] = ab0 * A[b, 0] + ab1 * A[b, 1] + ab2 * A[b, 2]
 
 
-@njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
-def j2(F, dim, c, state, trial, i, P, work):
-    """The return mapping at point i (see the module): reads the committed state[i], writes
-    trial[i] and P; returns psi^e (NaN if J <= 0). `work`: (WORK, 3, 3) scratch."""
-    mu, bulk, yield0, hardening = c[1], c[2], c[3], c[4]
-    F3, Finv, cp, be, N, tau, vectors = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
+@njit(cache=True, inline="always")
+def predictor(F, dim, mu, state, i, work):
+    """The elastic trial state at point i from its committed (C^p)^-1: b^e = F (C^p)^-1 F^T,
+    its principal directions N (work[4]) and log stretches, the deviatoric part dev
+    (work[6][2]) and F^-1 (work[1]); returns (whether J > 0 and b^e is positive definite,
+    theta = ln J, |dev tau^trial| = 2 mu |dev|)."""
+    F3, Finv, cp, be, N, vectors = work[0], work[1], work[2], work[3], work[4], work[6]
     w, eps, dev = vectors[0], vectors[1], vectors[2]
     for a in range(3):
         for b in range(3):
             F3[a, b] = F[a, b] if a < dim and b < dim else (1.0 if a == b else 0.0)
     J = det(F3, 3)
     if not J > 0.0:
-        return math.nan
+        return False, 0.0, 0.0
     inverse(F3, 3, Finv)
     for k in range(6):
         a, b = SYMMETRIC_PAIRS[k]
@@ -132,19 +133,23 @@ def j2(F, dim, c, state, trial, i, P, work):
     symmetric_eigen(be, w, N)
     for a in range(3):
         if not w[a] > 0.0:
-            return math.nan
+            return False, 0.0, 0.0
         eps[a] = 0.5 * math.log(w[a])
     theta = eps[0] + eps[1] + eps[2]
     for a in range(3):
         dev[a] = eps[a] - theta / 3.0
-    norm = 2.0 * mu * math.sqrt(dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2])
-    eps_bar = state[i, PLASTIC_STRAIN]
-    excess = _SQRT_3_2 * norm - max(yield0 + hardening * eps_bar, 0.0)
-    step = 0.0
-    if excess > 0.0:
-        step = excess / (3.0 * mu + hardening)
-        if yield0 + hardening * (eps_bar + step) < 0.0:  # the yield stress is exhausted
-            step = _SQRT_3_2 * norm / (3.0 * mu)
+    return True, theta, 2.0 * mu * math.sqrt(dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2])
+
+
+@njit(cache=True, inline="always")
+def corrector(F, dim, mu, bulk, state, trial, i, P, work, theta, norm, step, plastic_work):
+    """The radial return by the plastic strain increment `step` from the predictor's trial
+    state: dev scaled by 1 - sqrt(6) mu step / |dev tau^trial|, tau, the new (C^p)^-1 (an
+    elastic step keeps it), the state's plastic strain and work (`plastic_work`) into
+    trial[i], P = tau F^-T; returns psi^e."""
+    Finv, cp, be, N, tau, vectors = work[1], work[2], work[3], work[4], work[5], work[6]
+    eps, dev = vectors[1], vectors[2]
+    if step > 0.0:
         scale = 1.0 - _SQRT_6 * mu * step / norm
         for a in range(3):
             dev[a] *= scale
@@ -171,8 +176,8 @@ def j2(F, dim, c, state, trial, i, P, work):
     else:
         for k in range(6):
             trial[i, k] = state[i, k]
-    trial[i, PLASTIC_STRAIN] = eps_bar + step
-    trial[i, PLASTIC_WORK] = state[i, PLASTIC_WORK] + _yield_integral(yield0, hardening, eps_bar, step)
+    trial[i, PLASTIC_STRAIN] = state[i, PLASTIC_STRAIN] + step
+    trial[i, PLASTIC_WORK] = plastic_work
     for a in range(dim):
         for b in range(dim):
             s = 0.0
@@ -180,6 +185,25 @@ def j2(F, dim, c, state, trial, i, P, work):
                 s += tau[a, k] * Finv[b, k]
             P[a, b] = s
     return psi
+
+
+@njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
+def j2(F, dim, c, state, trial, i, P, work):
+    """The return mapping at point i (see the module): reads the committed state[i], writes
+    trial[i] and P; returns psi^e (NaN if J <= 0). `work`: (WORK, 3, 3) scratch."""
+    mu, bulk, yield0, hardening = c[1], c[2], c[3], c[4]
+    admissible, theta, norm = predictor(F, dim, mu, state, i, work)
+    if not admissible:
+        return math.nan
+    eps_bar = state[i, PLASTIC_STRAIN]
+    excess = _SQRT_3_2 * norm - max(yield0 + hardening * eps_bar, 0.0)
+    step = 0.0
+    if excess > 0.0:
+        step = excess / (3.0 * mu + hardening)
+        if yield0 + hardening * (eps_bar + step) < 0.0:  # the yield stress is exhausted
+            step = _SQRT_3_2 * norm / (3.0 * mu)
+    return corrector(F, dim, mu, bulk, state, trial, i, P, work, theta, norm, step,
+                     state[i, PLASTIC_WORK] + _yield_integral(yield0, hardening, eps_bar, step))
 
 
 def yield_stress(c: np.ndarray, state: np.ndarray) -> np.ndarray:
@@ -217,14 +241,15 @@ def _check(path: str, material: dict) -> None:
 J2_PLASTICITY = 5
 LAW = Law(
     "j2_plasticity", J2_PLASTICITY,
-    dict(ISOTROPIC_KEYS, yield_stress=Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
+    dict(ISOTROPIC_KEYS,
+         yield_stress=Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
          hardening_modulus=Key("float", None, None, "j2_plasticity: H = d sigma_Y / d eps_bar, negative for "
                                "softening (default 0: perfectly plastic) [Pa]")),
     lambda m: isotropic(m, (m["yield_stress"], m.get("hardening_modulus") or 0.0)),
     optional=("hardening_modulus",), state="plastic_state", check=_check, doc="[G §4.5], [R §9.5]",
     plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state))
-# the elasto-plastic state, wherever the law's stress is evaluated
+# the elasto-plastic state, wherever the law's stress is evaluated (carried where a law names it)
 for _points in ("particles", "stress_points", "gauss_points"):
-    register(Field("plastic_state", "state", owner="j2_plasticity", points=_points, columns=COLUMNS,
+    register(Field("plastic_state", "state", owner="plastic_state", points=_points, columns=COLUMNS,
                    initial=lambda X, gid: initial_state(len(X)),
                    doc="committed (C^p)^-1, equivalent plastic strain and plastic work per volume"))

@@ -1,6 +1,6 @@
 """The compiled material update the formulations call at every integration point:
 
-    psi = update(law, F, dim, c, state, trial, i, P, work)
+    psi = update(law, F, dim, c, state, trial, i, P, work, dt)
 
 writes the first Piola-Kirchhoff stress P for the deformation gradient F and returns the
 (elastic) strain-energy density per unit reference volume (NaN for an inverted point); `c`
@@ -8,7 +8,9 @@ are the law's constants (materials.Constants.values). A law with per-point state
 point i's committed state, row i of `state` (points, k), and writes its new state to row i
 of `trial`; the loop commits trial to state at the start of the next step, so evaluating
 the stress again at the same F (a restart, a reference update) gives the same result.
-`work` is scratch space, (WORK, 3, 3), allocated once per stage. `stiffening` is the
+`work` is scratch space, (WORK, 3, 3), allocated once per stage; dt is the step over
+which F came from the committed state (0 at set-up), for the laws whose stress depends
+on the rate. `stiffening` is the
 factor on the reference P-wave speed squared that the stable time step uses. `law` is a
 compile-time constant of the calling stage, so the branch below is folded away: each
 stage holds only its law's code. A new law family adds one branch here and its line in
@@ -29,7 +31,7 @@ J2_PLASTICITY = elastoplastic.J2_PLASTICITY
 
 
 @njit(cache=True, inline="always")
-def update(law, F, dim, c, state, trial, i, P, work):
+def update(law, F, dim, c, state, trial, i, P, work, dt):
     """One branch per law family (the hyperelastic laws share one)."""
     if law == J2_PLASTICITY:
         return elastoplastic.j2(F, dim, c, state, trial, i, P, work)
@@ -52,10 +54,10 @@ def stiffening(law, s_max, J, c):
 
 
 @njit(cache=True)
-def stresses(law, F, dim, c, state, trial, P, psi):
+def stresses(law, F, dim, c, state, trial, P, psi, dt=0.0):
     """P[n], psi[n] and trial[n] for a stack of deformation gradients F[n] from the
     committed states state[n] (output, material tests; state and trial have no columns
     for a law without state)."""
     work = np.empty((WORK, 3, 3))
     for n in range(F.shape[0]):
-        psi[n] = update(law, F[n], dim, c, state, trial, n, P[n], work)
+        psi[n] = update(law, F[n], dim, c, state, trial, n, P[n], work, dt)
