@@ -7,7 +7,7 @@ line here and its line in materials.update.
 from __future__ import annotations
 
 from parsph.fields import Field, register
-from parsph.materials import damage, elastic, elastoplastic
+from parsph.materials import damage, elastic, elastoplastic, johnson_cook
 from parsph.materials.law import Constants, Law
 
 __all__ = ["LAWS", "LAW_KEYS", "Constants", "Law", "constants"]
@@ -15,6 +15,7 @@ __all__ = ["LAWS", "LAW_KEYS", "Constants", "Law", "constants"]
 LAWS = {law.name: law for law in (
     *elastic.LAWS,
     elastoplastic.LAW,
+    johnson_cook.LAW,
 )}
 LAW_KEYS = {k: key for law in LAWS.values() for k, key in law.keys.items()}  # every law's material keys
 # tensile damage over any solid law (materials.damage), at the particles

@@ -24,10 +24,11 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.materials import elastic, elastoplastic
+from parsph.materials import elastic, elastoplastic, johnson_cook
 
 WORK = elastoplastic.WORK  # the most scratch matrices a law uses
 J2_PLASTICITY = elastoplastic.J2_PLASTICITY
+JOHNSON_COOK = johnson_cook.JOHNSON_COOK
 
 
 @njit(cache=True, inline="always")
@@ -35,6 +36,8 @@ def update(law, F, dim, c, state, trial, i, P, work, dt):
     """One branch per law family (the hyperelastic laws share one)."""
     if law == J2_PLASTICITY:
         return elastoplastic.j2(F, dim, c, state, trial, i, P, work)
+    if law == JOHNSON_COOK:
+        return johnson_cook.update(F, dim, c, state, trial, i, P, work, dt)
     return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
 
 
