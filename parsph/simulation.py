@@ -227,6 +227,7 @@ class Simulation:
         self.gid = local.gid[:keep]
         self.body = body[:keep]
         self.moves = np.array([b.moves for b in self.bodies])[self.body]  # the rows whose reference moves
+        self.all_move = bool(self.moves.all())
         for b in self.bodies:
             b.lo, b.hi = (int(k) for k in np.searchsorted(self.gid[:n], [b.first, b.last]))
         self.X, self.mass, self.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
@@ -790,8 +791,9 @@ class Simulation:
                 self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         n = self.n_owned
         moved = {name: self._moved(name) for name in self.sets}  # stress points at the current configuration
-        searching = self.search_rule.every == 1 or self.search_rule.due(
-            np.concatenate([np.where(self.moves[:n, None], self.X[:n] + self.u[:n], self.Xr[:n]), *moved.values()]))
+        x = self.X[:n] + self.u[:n] if self.all_move else \
+            np.where(self.moves[:n, None], self.X[:n] + self.u[:n], self.Xr[:n])  # the new reference
+        searching = self.search_rule.every == 1 or self.search_rule.due(np.concatenate([x, *moved.values()]))
         if searching:
             self._search(moved)
         else:
@@ -842,11 +844,17 @@ class Simulation:
             getattr(self, name)[:n] = value
         self.decomp.refresh_all(*(self.particles.arrays[name] for name in fields.migrating(self.carried)
                                   if name != "gid"))
-        np.subtract(self.Xr, self.X, out=self.shift)
-        if self.eulerian:
-            np.copyto(self.shift, self.u, where=self.moves[:, None])  # d = 0 exactly (_reference_shift)
-        np.subtract(self.u, self.shift, out=self.d)
-        self.d[self.moves] = 0.0
+        if self.eulerian and self.all_move:
+            self.shift[:] = self.u  # d = 0 exactly (_reference_shift)
+        else:
+            np.subtract(self.Xr, self.X, out=self.shift)
+            if self.eulerian:
+                np.copyto(self.shift, self.u, where=self.moves[:, None])
+        if self.all_move:
+            self.d[:] = 0.0
+        else:  # the bodies that keep their initial reference: d = u
+            np.subtract(self.u, self.shift, out=self.d)
+            self.d[self.moves] = 0.0
         self.fs[:] = eye
         self.hg_psi[self.moves[: len(self.hg_psi)]] = 0.0
         with self._update_failure(), collective(self.comm):
@@ -869,8 +877,8 @@ class Simulation:
         n = self.n_owned
         new = dict(Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(), measure_r=self.J[:n] * self.measure[:n],
                    volume_r=self.J[:n] * self.volume[:n])
-        still = ~self.moves[:n]
-        if still.any():
+        if not self.all_move:
+            still = ~self.moves[:n]
             for name, value in new.items():
                 value[still] = getattr(self, name)[:n][still]
         return new
