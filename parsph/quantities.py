@@ -1,8 +1,8 @@
-"""Output quantities: what snapshots and probes can show, with shapes and units, and the
-units of the history's series, declared once. Snapshot field validation, probe and history
-units and snapshot sizes derive from this registry.
-
-Most quantities are computed from the state (`Simulation.quantity`); every registered field
+"""Output quantities: what snapshots and probes can show, with shapes, units and how each
+is computed from the state, and the units of the history's series, declared once.
+Snapshot field validation, probe and history units, snapshot sizes and
+`Simulation.quantity` derive from this registry. A module that knows a quantity registers
+it (`register`: the material laws their read-outs); every registered field
 (parsph.fields) that declares units is a quantity too, under its own name, read directly
 from the point set.
 """
@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
 
 from parsph import fields
 
@@ -22,32 +25,49 @@ class Quantity:
     units: str
     probe: bool = True  # probes may reduce it over a group
     doc: str = ""
+    compute: Callable | None = None  # (simulation, owned rows sel) -> its values there
+
+
+def _zeros_without_contact(sim, sel):
+    return sim.contact.force[sel] if sim.contact else np.zeros((len(sel), sim.dim))
 
 
 _BUILT_IN = (
-    Quantity("displacement", "vector", "m"),
-    Quantity("velocity", "vector", "m/s"),
-    Quantity("position", "point", "m"),
-    Quantity("reaction", "vector", "N", doc="force the constraints exert"),
-    Quantity("force", "vector", "N", doc="internal, hourglass and body force"),
-    Quantity("J", "scalar", "1", doc="volume ratio det F"),
-    Quantity("von_mises", "scalar", "Pa"),
-    Quantity("disorder", "scalar", "1", doc="hourglass error [G eq. 26]"),
-    Quantity("spacing_ratio", "scalar", "1", doc="nearest current neighbour against the smooth spacing"),
+    Quantity("displacement", "vector", "m", compute=lambda sim, sel: sim.u[sel]),
+    Quantity("velocity", "vector", "m/s", compute=lambda sim, sel: sim.v[sel]),
+    Quantity("position", "point", "m", compute=lambda sim, sel: sim.X[sel] + sim.u[sel]),
+    Quantity("reaction", "vector", "N", doc="force the constraints exert",
+             compute=lambda sim, sel: sim.reaction()[sel]),
+    Quantity("force", "vector", "N", doc="internal, hourglass and body force",
+             compute=lambda sim, sel: sim.force[sel]),
+    Quantity("J", "scalar", "1", doc="volume ratio det F", compute=lambda sim, sel: sim.J[sel]),
+    Quantity("von_mises", "scalar", "Pa", compute=lambda sim, sel: sim.von_mises(sel)),
+    Quantity("disorder", "scalar", "1", doc="hourglass error [G eq. 26]",
+             compute=lambda sim, sel: sim.disorder()[sel]),
+    Quantity("spacing_ratio", "scalar", "1", doc="nearest current neighbour against the smooth spacing",
+             compute=lambda sim, sel: sim.spacing_ratio()[sel]),
     Quantity("rank", "rank", "1", probe=False, doc="owner rank"),
     Quantity("reference_position", "point", "m", probe=False),
-    Quantity("cauchy_stress", "tensor", "Pa", probe=False),
-    Quantity("plastic_strain", "scalar", "1", doc="equivalent plastic strain (0 for elastic laws)"),
-    Quantity("plastic_work", "scalar", "J/m^3", doc="plastic work per unit reference volume"),
-    Quantity("damage", "scalar", "1", doc="tensile damage D (0 without damage)"),
-    Quantity("contact_force", "vector", "N", doc="force from other bodies' particles (parsph.contact)"),
-    Quantity("body", "scalar", "1", probe=False, doc="index of the particle's body, in the scene's order"),
+    Quantity("cauchy_stress", "tensor", "Pa", probe=False, compute=lambda sim, sel: sim.cauchy_stress(sel)),
+    Quantity("contact_force", "vector", "N", doc="force from other bodies' particles (parsph.contact)",
+             compute=_zeros_without_contact),
+    Quantity("body", "scalar", "1", probe=False, doc="index of the particle's body, in the scene's order",
+             compute=lambda sim, sel: sim.body[sel].astype(float)),
 )
 BUILT_IN = {q.name: q for q in _BUILT_IN}
 
 
+def register(*quantities: Quantity) -> None:
+    """Declare quantities computed by the module that knows them."""
+    for q in quantities:
+        if q.name in BUILT_IN and BUILT_IN[q.name] != q:
+            raise ValueError(f"quantity '{q.name}' is declared twice, differently")
+        BUILT_IN[q.name] = q
+
+
 def registry() -> dict:
-    """Every quantity by name: the built-in ones, then the registered fields with units."""
+    """Every quantity by name: the built-in and registered ones, then the registered fields
+    with units."""
     out = dict(BUILT_IN)
     for f in fields.REGISTRY["particles"].values():
         if f.units is not None and f.name not in out:

@@ -31,7 +31,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from parsph import config, fields, materials
+from parsph import config, fields, materials, quantities
 from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
 from parsph.collocation import BoundaryCollocation, collocated
 from parsph.contact import Contact
@@ -933,40 +933,11 @@ class Simulation:
         return np.flatnonzero(self.groups[name])
 
     def quantity(self, name: str, sel: np.ndarray) -> np.ndarray:
-        """A particle quantity on the owned particles `sel` (probes and snapshots)."""
-        if name == "displacement":
-            return self.u[sel]
-        if name == "velocity":
-            return self.v[sel]
-        if name == "position":
-            return self.X[sel] + self.u[sel]
-        if name == "reaction":
-            return self.reaction()[sel]
-        if name == "force":
-            return self.force[sel]
-        if name == "J":
-            return self.J[sel]
-        if name == "von_mises":
-            return self.von_mises(sel)
-        if name == "cauchy_stress":
-            return self.cauchy_stress(sel)
-        if name in ("plastic_strain", "plastic_work"):
-            return self.plastic(sel, name.removeprefix("plastic_"))
-        if name == "damage":
-            out = np.zeros(len(sel))
-            for b in self.bodies:
-                if b.failure_strain is not None:
-                    rows = np.flatnonzero(self.body[sel] == b.index)
-                    out[rows] = self.damage_state(b)[0][sel[rows], damage.DAMAGE]
-            return out
-        if name == "contact_force":
-            return self.contact.force[sel] if self.contact else np.zeros((len(sel), self.dim))
-        if name == "body":
-            return self.body[sel].astype(float)
-        if name == "disorder":
-            return self.disorder()[sel]
-        if name == "spacing_ratio":
-            return self.spacing_ratio()[sel]
+        """A particle quantity on the owned particles `sel` (probes and snapshots): computed as
+        parsph.quantities registers it, or a registered field's values."""
+        q = quantities.BUILT_IN.get(name)
+        if q is not None and q.compute is not None:
+            return q.compute(self, sel)
         if fields.known(name) and fields.get(name).units is not None:  # a registered field
             return self.particles.arrays[name][sel]
         raise ValueError(name)
@@ -1020,14 +991,15 @@ class Simulation:
             P[rows] = part
         return np.einsum("nab,ncb->nac", P, F) / self.J[sel, None, None]
 
-    def plastic(self, sel: np.ndarray, what: str) -> np.ndarray:
-        """The equivalent plastic strain ("strain") or the plastic work per unit reference
-        volume ("work") at the owned particles `sel` (0 for the laws without plasticity)."""
+    def law_readout(self, sel: np.ndarray, name: str) -> np.ndarray:
+        """The material laws' read-out `name` (materials.law.Readout) of their last stress
+        evaluation's state at the owned particles `sel` (0 for the laws without it)."""
         out = np.zeros(len(sel))
         for b in self.bodies:
-            if b.law.plastic:
+            readout = b.law.readouts.get(name)
+            if readout is not None:
                 rows = np.flatnonzero(self.body[sel] == b.index)
-                out[rows] = self.material_state(b)[1][sel[rows], getattr(b.law.plastic, what)]
+                out[rows] = readout.compute(b.constants.values, self.material_state(b)[1][sel[rows]])
         return out
 
     def von_mises(self, sel: np.ndarray) -> np.ndarray:

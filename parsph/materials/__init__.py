@@ -6,6 +6,9 @@ line here and its line in materials.update.
 
 from __future__ import annotations
 
+import numpy as np
+
+from parsph import quantities
 from parsph.fields import Field, register
 from parsph.materials import damage, elastic, elastoplastic, johnson_cook
 from parsph.materials.law import Constants, Law
@@ -22,6 +25,24 @@ LAW_KEYS = {k: key for law in LAWS.values() for k, key in law.keys.items()}  # e
 register(Field("damage", "state", owner="damage", columns=damage.COLUMNS,
                initial=lambda X, gid: damage.initial_state(len(X)),
                doc="committed damage, largest principal strain, work taken, last P and F"))
+
+
+def _damage(sim, sel):
+    """The committed damage D at the owned particles `sel` (0 without damage)."""
+    out = np.zeros(len(sel))
+    for b in sim.bodies:
+        if b.failure_strain is not None:
+            rows = np.flatnonzero(sim.body[sel] == b.index)
+            out[rows] = sim.damage_state(b)[0][sel[rows], damage.DAMAGE]
+    return out
+
+
+# the laws' read-outs (the first law that declares a name gives its units) and the damage
+quantities.register(
+    *{name: quantities.Quantity(name, "scalar", readout.units, doc=readout.doc,
+                                compute=lambda sim, sel, name=name: sim.law_readout(sel, name))
+      for law in reversed(LAWS.values()) for name, readout in law.readouts.items()}.values(),
+    quantities.Quantity("damage", "scalar", "1", doc="tensile damage D (0 without damage)", compute=_damage))
 
 
 def constants(material: dict) -> Constants:

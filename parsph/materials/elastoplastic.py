@@ -33,7 +33,7 @@ from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.keys import Key, positive
 from parsph.materials.elastic import ISOTROPIC_KEYS, det, inverse, isotropic
-from parsph.materials.law import Law, Plastic
+from parsph.materials.law import Law, Plastic, Readout
 
 COLUMNS = 8  # (C^p)^-1 in 6 columns, eps_bar, w_p
 WORK = 7  # scratch 3x3 matrices of the update
@@ -239,6 +239,11 @@ def _check(path: str, material: dict) -> None:
 
 
 J2_PLASTICITY = 5
+READOUTS = {  # of the laws with this state
+    "plastic_strain": Readout("1", "equivalent plastic strain (0 for elastic laws)",
+                              lambda c, state: state[:, PLASTIC_STRAIN]),
+    "plastic_work": Readout("J/m^3", "plastic work per unit reference volume", lambda c, state: state[:, PLASTIC_WORK]),
+}
 LAW = Law(
     "j2_plasticity", J2_PLASTICITY,
     dict(ISOTROPIC_KEYS,
@@ -247,7 +252,7 @@ LAW = Law(
                                "softening (default 0: perfectly plastic) [Pa]")),
     lambda m: isotropic(m, (m["yield_stress"], m.get("hardening_modulus") or 0.0)),
     optional=("hardening_modulus",), state="plastic_state", check=_check, doc="[G §4.5], [R §9.5]",
-    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state))
+    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state), readouts=READOUTS)
 # the elasto-plastic state, wherever the law's stress is evaluated (carried where a law names it)
 for _points in ("particles", "stress_points", "gauss_points"):
     register(Field("plastic_state", "state", owner="plastic_state", points=_points, columns=COLUMNS,

@@ -27,9 +27,9 @@ from numba import njit
 from parsph.errors import InputError
 from parsph.keys import Key, in_range, non_negative, positive
 from parsph.materials.elastic import ISOTROPIC_KEYS, isotropic
-from parsph.materials.elastoplastic import (PLASTIC_STRAIN, PLASTIC_WORK, corrector, keep_elastic_state,
+from parsph.materials.elastoplastic import (PLASTIC_STRAIN, PLASTIC_WORK, READOUTS, corrector, keep_elastic_state,
                                             predictor)
-from parsph.materials.law import Law, Plastic
+from parsph.materials.law import Law, Plastic, Readout
 
 JOHNSON_COOK = 6
 _SQRT_3_2 = math.sqrt(1.5)
@@ -133,4 +133,5 @@ LAW = Law(
     lambda m: _constants(dict(m, taylor_quinney=0.9 if m["taylor_quinney"] is None else m["taylor_quinney"])),
     optional=("jc_c", "jc_m", "reference_strain_rate", "taylor_quinney"), state="plastic_state", check=_check,
     doc="Johnson & Cook 1983",
-    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state))
+    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state),
+    readouts=dict(READOUTS, temperature=Readout("K", "temperature (johnson_cook; 0 for the other laws)", temperature)))

@@ -44,6 +44,15 @@ class Plastic:
 
 
 @dataclass(frozen=True)
+class Readout:
+    """A scalar a law computes from its per-point state, for snapshots and probes."""
+
+    units: str
+    doc: str
+    compute: Callable  # (constants values, state rows) -> values
+
+
+@dataclass(frozen=True)
 class Law:
     """A material law: `material.model = name`, the scene keys it takes (`keys`: their Key
     declarations; `optional` ones may be left out), its constants, its registered per-point
@@ -58,6 +67,7 @@ class Law:
     plastic: Plastic | None = None
     fluid: bool = False  # no shear strength: no tensile damage
     check: Callable | None = None  # (path, material table) -> None: raises InputError
+    readouts: dict = field(default_factory=dict)  # {quantity name: Readout}
     doc: str = ""
     takes: tuple = field(init=False)  # the keys it requires
 
