@@ -10,7 +10,7 @@ import numpy as np
 
 from parsph import quantities
 from parsph.fields import Field, register
-from parsph.materials import damage, elastic, elastoplastic, johnson_cook
+from parsph.materials import damage, elastic, elastoplastic, johnson_cook, mie_gruneisen
 from parsph.materials.law import Constants, Law
 
 __all__ = ["LAWS", "LAW_KEYS", "Constants", "Law", "constants"]
@@ -19,6 +19,7 @@ LAWS = {law.name: law for law in (
     *elastic.LAWS,
     elastoplastic.LAW,
     johnson_cook.LAW,
+    mie_gruneisen.LAW,
 )}
 LAW_KEYS = {k: key for law in LAWS.values() for k, key in law.keys.items()}  # every law's material keys
 # tensile damage over any solid law (materials.damage), at the particles

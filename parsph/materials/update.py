@@ -24,11 +24,12 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.materials import elastic, elastoplastic, johnson_cook
+from parsph.materials import elastic, elastoplastic, johnson_cook, mie_gruneisen
 
 WORK = elastoplastic.WORK  # the most scratch matrices a law uses
 J2_PLASTICITY = elastoplastic.J2_PLASTICITY
 JOHNSON_COOK = johnson_cook.JOHNSON_COOK
+MIE_GRUNEISEN = mie_gruneisen.MIE_GRUNEISEN
 
 
 @njit(cache=True, inline="always")
@@ -38,6 +39,8 @@ def update(law, F, dim, c, state, trial, i, P, work, dt):
         return elastoplastic.j2(F, dim, c, state, trial, i, P, work)
     if law == JOHNSON_COOK:
         return johnson_cook.update(F, dim, c, state, trial, i, P, work, dt)
+    if law == MIE_GRUNEISEN:
+        return mie_gruneisen.update(F, dim, c, state, trial, i, P, work, dt)
     return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
 
 
@@ -47,10 +50,14 @@ def stiffening(law, s_max, J, c):
     under stretch for Saint Venant-Kirchhoff, J^(1 - gamma) under compression for Tait's
     fluid (its sound speed squared, c[1] = gamma), 1 - ln J under compression for the
     neo-Hookean, Mooney-Rivlin and Hencky elasto-plastic laws (their bulk terms, which set
-    the wave speed; plastic flow only softens the elasto-plastic one); inf
-    for an inverted point."""
+    the wave speed; plastic flow only softens the elasto-plastic one), the Hugoniot's
+    tangent under compression for Mie-Grüneisen; inf for an inverted point."""
     if law == elastic.SAINT_VENANT_KIRCHHOFF:
         return max(1.0, 0.5 * (3.0 * s_max * s_max - 1.0))
+    if law == MIE_GRUNEISEN:  # the Hugoniot's tangent and its pressure's share through Gamma0
+        eta = 1.0 - J
+        return max(1.0, mie_gruneisen.hugoniot(c, eta)[1] + c[mie_gruneisen.GAMMA] * max(eta, 0.0)) \
+            if J > 0 else math.inf
     if law == elastic.TAIT_FLUID:
         return max(1.0, J ** (1.0 - c[1])) if J > 0 else math.inf
     return max(1.0, 1.0 - math.log(J)) if J > 0 else math.inf

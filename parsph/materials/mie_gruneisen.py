@@ -1,0 +1,106 @@
+"""The Mie-Grüneisen equation of state with a linear shock-velocity relation U_s = c0 + s u_p
+(M. A. Meyers, Dynamic Behavior of Materials, Wiley 1994, ch. 4), for shock-loaded solids,
+with a perfectly plastic von Mises strength (or none):
+
+    p = p_H(eta) (1 - Gamma0 eta / 2) + Gamma0 E,   eta = 1 - J = 1 - rho0 / rho,
+    p_H = rho0 c0^2 eta / (1 - s eta)^2 in compression, rho0 c0^2 eta in tension,
+
+the pressure of the Hugoniot p_H, whose energy is p_H eta / 2 per reference volume, moved
+off it by the internal energy E per unit reference volume with Gamma rho = Gamma0 rho0. E
+is the work of the pressure, dE = -p dJ (by the trapezoidal rule over the step, solved with
+p in closed form: p is linear in E), plus the plastic work. The deviatoric part is
+materials.elastoplastic's Hencky law and radial return with the shear modulus and a
+constant yield stress (none: no shear strength once it flows, a fluid). The strain energy
+the balance counts is the deviatoric elastic energy plus the pressure's work.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from parsph.fields import Field, register
+from parsph.keys import Key, non_negative, positive
+from parsph.materials.elastoplastic import (COLUMNS, PLASTIC_STRAIN, PLASTIC_WORK, READOUTS, corrector,
+                                            initial_state, keep_elastic_state, predictor)
+from parsph.materials.law import Law, Plastic, moduli
+
+MIE_GRUNEISEN = 7
+_SQRT_3_2 = math.sqrt(1.5)
+# state: the elasto-plastic columns, then the pressure's work, J and p of the last evaluation
+ENERGY, LAST_J, PRESSURE = COLUMNS, COLUMNS + 1, COLUMNS + 2
+# constants values: lam, mu, K, then
+YIELD, RHO_C2, SLOPE, GAMMA = 3, 4, 5, 6
+
+
+@njit(cache=True, inline="always")
+def hugoniot(c, eta):
+    """The pressure of the reference curve at eta = 1 - J, and its tangent over rho0 c0^2."""
+    if eta <= 0.0:
+        return c[RHO_C2] * eta, 1.0
+    d = 1.0 - c[SLOPE] * eta
+    return c[RHO_C2] * eta / (d * d), (1.0 + c[SLOPE] * eta) / (d * d * d)
+
+
+@njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
+def update(F, dim, c, state, trial, i, P, work, dt):
+    """The pressure, the deviatoric return mapping and the new state at point i (see the
+    module); returns the strain energy (NaN if J <= 0)."""
+    mu, yield_stress = c[1], c[YIELD]
+    admissible, theta, norm = predictor(F, dim, mu, state, i, work)
+    if not admissible:
+        return math.nan
+    step = 0.0
+    if _SQRT_3_2 * norm > yield_stress:  # perfectly plastic: back to the yield surface
+        step = (_SQRT_3_2 * norm - yield_stress) / (3.0 * mu)
+    plastic_work = state[i, PLASTIC_WORK] + yield_stress * step
+    psi = corrector(F, dim, mu, 0.0, state, trial, i, P, work, theta, norm, step, plastic_work)  # deviatoric
+    J = math.exp(theta)
+    eta = 1.0 - J
+    p_h = hugoniot(c, eta)[0]
+    reference = p_h * (1.0 - 0.5 * c[GAMMA] * eta) if eta > 0.0 else p_h
+    dJ = J - state[i, LAST_J]
+    p = (reference + c[GAMMA] * (state[i, ENERGY] - 0.5 * state[i, PRESSURE] * dJ + plastic_work)) / (
+        1.0 + 0.5 * c[GAMMA] * dJ)
+    energy = state[i, ENERGY] - 0.5 * (state[i, PRESSURE] + p) * dJ
+    trial[i, ENERGY], trial[i, LAST_J], trial[i, PRESSURE] = energy, J, p
+    Finv = work[1]
+    for a in range(dim):
+        for b in range(dim):
+            P[a, b] -= p * J * Finv[b, a]
+    return psi + energy
+
+
+def _initial(n: int) -> np.ndarray:
+    out = np.zeros((n, PRESSURE + 1))
+    out[:, :COLUMNS] = initial_state(n)
+    out[:, LAST_J] = 1.0
+    return out
+
+
+def yield_stress(c: np.ndarray, state: np.ndarray) -> np.ndarray:
+    return np.full(len(state), c[YIELD])
+
+
+def _constants(m: dict):
+    """(lam, mu, K, yield stress, rho0 c0^2, s, Gamma0), K = rho0 c0^2."""
+    bulk = m["density"] * m["sound_speed"] ** 2
+    return moduli((bulk - 2.0 * m["shear_modulus"] / 3.0, m["shear_modulus"], bulk, m["yield_stress"] or 0.0, bulk,
+                   m["hugoniot_slope"], m["gruneisen_gamma"]), m["shear_modulus"], bulk, m["density"])
+
+
+LAW = Law(
+    "mie_gruneisen", MIE_GRUNEISEN,
+    {"shear_modulus": Key("float", None, positive, "[Pa]"),
+     "sound_speed": Key("float", None, positive, "mie_gruneisen: c0 of U_s = c0 + s u_p, the bulk sound speed [m/s]"),
+     "hugoniot_slope": Key("float", None, non_negative, "mie_gruneisen: s of U_s = c0 + s u_p"),
+     "gruneisen_gamma": Key("float", None, non_negative, "mie_gruneisen: Gamma0, Grüneisen's coefficient"),
+     "yield_stress": Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]")},
+    _constants, optional=("yield_stress",), state="shock_state", doc="Meyers 1994, ch. 4",
+    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state), readouts=READOUTS)
+for _points in ("particles", "stress_points", "gauss_points"):
+    register(Field("shock_state", "state", owner="shock_state", points=_points, columns=PRESSURE + 1,
+                   initial=lambda X, gid: _initial(len(X)),
+                   doc="the elasto-plastic state, the pressure's work per reference volume, J and p"))
