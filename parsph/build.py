@@ -165,8 +165,11 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
     factor = config.thickness(scene)
     owned["volume"] = measure * factor
     owned["mass"] = owned["volume"] * body["material"]["density"]
-    if any(b["formulation"]["type"] == "kbm" for b in config.bodies(scene)):  # quadrature weights
-        owned["weight"] = owned["volume"] if body["formulation"]["type"] != "kbm" else \
+    def with_stress_points(b):  # KBM: its particles integrate too, with their share of the cells
+        return galerkin.integration_set(b["formulation"]) == galerkin.STRESS_POINTS
+
+    if any(with_stress_points(b) for b in config.bodies(scene)):  # quadrature weights
+        owned["weight"] = owned["volume"] if not with_stress_points(body) else \
             stress_points_of(gens[0], factor).particle_weights(owned["gid"])
     neighbours = scene["kernel"]["neighbours"]
     if neighbours > 0:

@@ -24,11 +24,11 @@ from typing import Any
 from parsph import expressions, quantities
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, in_range, non_negative, one_of, positive
+from parsph.formulations import FORMULATIONS
 from parsph.materials import LAW_KEYS, LAWS, constants
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = tuple(LAWS)
-FORMULATIONS = ("tlsph", "ulsph", "sph", "rlm", "kbm", "efg")
 
 
 def snapshot_fields(v):
@@ -646,46 +646,20 @@ def upgrade(scene: dict) -> None:
 def _formulation(path: str, raw: Any, dim: int) -> dict:
     """A resolved formulation table: defaults by type, update triggers checked."""
     form = _table(path, raw, SECTIONS["formulation"], dim)
-    if form["hourglass"] is None:
-        form["hourglass"] = 50.0 if form["type"] in ("tlsph", "ulsph") else 0.0
+    FORMULATIONS[form["type"]].resolve(path, form)  # the type's defaults and rules
     if form["plastic_hourglass"] == "viscous" and not (form["hourglass"] > 0 and form["hourglass_form"] == "paper"):
         raise InputError(f"{path}.plastic_hourglass = 'viscous' (LAMMPS MACHDYN's) needs the paper's hourglass "
                          f"force: {path}.hourglass > 0 and {path}.hourglass_form = 'paper'")
-    if form["type"] == "ulsph" and not (form["update_every"] or form["update_strain"]):
-        raise InputError(f"{path}.type = 'ulsph' needs an update trigger: {path}.update_every "
-                         f"(steps) or {path}.update_strain (log strain)")
-    if form["type"] != "ulsph" and (form["update_every"] or form["update_strain"]):
-        raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
-    if form["type"] in ("sph", "rlm", "kbm", "efg") and form["force_form"] != "pair":
-        raise InputError(f"{path}.force_form applies to tlsph and ulsph; {form['type']} has its own force row")
-    if form["type"] in ("kbm", "efg") and (form["viscosity"] > 0 or form["viscosity_beta"] > 0):
-        raise InputError(f"{path}.viscosity applies to tlsph, ulsph, sph and rlm, not to {form['type']}")
-    if form["type"] in ("kbm", "efg") and form["hourglass"] > 0:
-        raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {form['type']} "
-                         "(give 0 or leave it out)")
-    if form["kernel"] == "eulerian" and (form["type"] not in ("sph", "rlm", "kbm", "efg")
-                                         or form["integration"] == "cells"):
-        raise InputError(f"{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'kbm' and 'efg' with "
-                         f"nodal integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
     if form["kernel"] == "eulerian" and form["hourglass"] > 0:
         raise InputError(f"{path}.hourglass applies to a Lagrangian kernel: with kernel = 'eulerian' the reference "
                          "is the current configuration, where F explains every separation (give 0 or leave it out)")
     for key in ("search_every", "skin"):
-        if form[key] is not None and form["kernel"] != "eulerian" and form["type"] != "ulsph":
+        if form[key] is not None and not _kept_lists(form):
             raise InputError(f"{path}.{key} applies to kernel = 'eulerian' and type = 'ulsph'")
         if form[key] is None:  # absent: as in scenes written before the key existed
             del form[key]
     if form["kernel"] != "eulerian":  # absent: as in scenes written before the key existed
         del form["kernel"]
-    if form["type"] != "efg" and form["integration"] is not None:
-        raise InputError(f"{path}.integration applies to type = 'efg'")
-    if form["type"] == "efg":
-        form["integration"] = form["integration"] or "nodal"
-    else:  # absent, as in scenes written before the key existed (checkpoints compare scenes)
-        del form["integration"]
-    if form["type"] in ("sph", "rlm", "kbm", "efg") and form["hessian"] > 0:
-        raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
-                         f"not to {form['type']}")
     return form
 
 
@@ -824,14 +798,13 @@ def validate(raw: dict) -> dict:
     _validate_lists(scene, raw, dim)
     for body in bodies(scene):
         if body["material"]["failure_strain"] is not None and (
-                LAWS[body["material"]["model"]].fluid or body["formulation"]["type"] in ("kbm", "efg")):
+                LAWS[body["material"]["model"]].fluid or not FORMULATIONS[body["formulation"]["type"]].damage):
             raise InputError(f"material.failure_strain: damage is for solids computed at the particles "
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
     for body in bodies(scene):
         mat, form = body["material"], body["formulation"]
-        if mat["break_pairs"] and (mat["failure_strain"] is None or form["type"] == "ulsph"
-                                   or form.get("kernel") == "eulerian" or scene["symmetry"]):
+        if mat["break_pairs"] and (mat["failure_strain"] is None or _kept_lists(form) or scene["symmetry"]):
             raise InputError("material.break_pairs needs material.failure_strain, a total-Lagrangian kernel "
                              "(not ulsph, not formulation.kernel = 'eulerian') and no [[symmetry]] planes")
         if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
@@ -845,8 +818,7 @@ def validate(raw: dict) -> dict:
         raise InputError("[[symmetry]] planes with formulation.kernel = 'eulerian' or type = 'ulsph' need "
                          "formulation.search_every = 1 (mirror images are made at each search)")
     for b, body in enumerate(bodies(scene)):
-        if body["formulation"]["type"] in ("kbm", "efg"):
-            _check_integration_points(body, f"bodies[{b}]" if multi else "geometry", scene)
+        FORMULATIONS[body["formulation"]["type"]].check_body(body, f"bodies[{b}]" if multi else "geometry", scene)
     if "contact" in raw:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
     scene["parameters"] = dict(raw.get("parameters", {}))
@@ -892,7 +864,7 @@ def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
 
 def _kept_lists(form: dict) -> bool:
     """Whether a resolved formulation keeps its neighbour lists between reference updates."""
-    return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
+    return FORMULATIONS[form["type"]].updated(form)
 
 
 def search_every(form: dict, symmetry: bool = False) -> int:
@@ -924,24 +896,6 @@ def _value_or_expression(path: str, item: dict, raw: dict, dim: int) -> None:
         _vector_len(f"{path}.value", item["value"], dim)
 
 
-def _check_integration_points(body: dict, where: str, scene: dict) -> None:
-    """kbm places its stress points in the cells of a box lattice or of a polar ring
-    (geometry.stress_points), efg with cell integration its Gauss points in cells over a
-    box lattice (geometry.gauss_points)."""
-    form = body["formulation"]
-    parts = body["parts"]
-    what = {"kbm": "stress points in the cells of", "efg": "Gauss points in background cells over"}[form["type"]]
-    box = len(parts) == 1 and parts[0]["shape"] == "box" and parts[0]["placement"] == "cell"
-    polar = len(parts) == 1 and parts[0]["shape"] == "polar_ring"
-    if form["type"] == "kbm" and not (box or polar):
-        raise InputError(f"formulation.type = 'kbm' places {what} one lattice: {where}.parts must be a single "
-                         "box with placement = 'cell' or a single polar_ring")
-    if form["type"] == "efg" and form["integration"] == "cells" and not box:
-        raise InputError(f"formulation.type = 'efg' places {what} one box lattice: "
-                         f"{where}.parts must be a single box with placement = 'cell'")
-    if scene["symmetry"]:
-        raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' (its "
-                         "shape functions and integration points have no mirror images); model the whole body")
 
 
 def parse_override(text: str) -> tuple[list[str | int], Any]:

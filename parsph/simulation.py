@@ -38,8 +38,7 @@ from parsph.contact import Contact
 from parsph.diagnostics import RowReduction, contact_parts, global_parts, probe_parts, rigid_parts
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
-from parsph.formulations import galerkin, reference, tlsph
-from parsph.formulations.nodal import NodalFormulation
+from parsph.formulations import FORMULATIONS, reference, tlsph
 from parsph.materials import damage, update
 from parsph.neighbors import crossing, find_pairs, pair_keys
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
@@ -82,8 +81,8 @@ class Body:
         self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
         self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs
         self.density = spec["material"]["density"]
-        kind = galerkin.GalerkinFormulation if spec["formulation"]["type"] in galerkin.TYPES else NodalFormulation
-        self.formulation = kind(spec["formulation"], dim, self.law.law_id, damaged=self.failure_strain is not None)
+        self.formulation = FORMULATIONS[spec["formulation"]["type"]](spec["formulation"], dim, self.law.law_id,
+                                                                     damaged=self.failure_strain is not None)
         self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0
         self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
@@ -274,11 +273,9 @@ class Simulation:
         self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
         self._find_broken()
         self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
-        if any(b.formulation.type in galerkin.TYPES for b in self.bodies):
-            with collective(self.comm):
-                for b in self.bodies:
-                    if b.formulation.type in galerkin.TYPES:
-                        b.formulation.build(self, b, self.scene["kernel"]["type"])
+        with collective(self.comm):  # the formulations' own relations
+            for b in self.bodies:
+                b.formulation.build(self, b, self.scene["kernel"]["type"])
         with collective(self.comm):
             parameters = self.scene["parameters"]
             self.bcs = BoundaryConditions(self.scene["bc"], self.groups, self.X[:n], self.gid[:n], parameters,
@@ -864,8 +861,7 @@ class Simulation:
                 self.eta, self.weighted_hessian, kept=self.ref.kept)
             self._exclude_kernel_pairs()
             for b in self.bodies:
-                if b.formulation.type in galerkin.TYPES:
-                    b.formulation.build(self, b, self.scene["kernel"]["type"], search=False)
+                b.formulation.build(self, b, self.scene["kernel"]["type"], search=False)
         if self.collocation:
             self.collocation = BoundaryCollocation(self)
         for b in self.bodies:

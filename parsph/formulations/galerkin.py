@@ -43,6 +43,7 @@ from parsph import COMPILED_SOURCE
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations.base import CompiledOnce, Stage
+from parsph.formulations.nodal import EULERIAN
 from parsph.formulations.reference import PairOptions
 from parsph.formulations import tlsph
 from parsph.formulations.tlsph import gradient_row, stress_at
@@ -150,10 +151,65 @@ class GalerkinFormulation:
     """One body's Galerkin formulation: shape functions, integration points, compiled
     stages, strain energy."""
 
+    TYPES = TYPES  # formulation.type names it serves
+    damage = False  # tensile damage is computed at the particles of the particle formulations
     eta = 0.0  # what the loop asks of every formulation: no Hessian stabilisation,
     hourglass_form = 0  # no hourglass control, no strain trigger of reference updates
     weighted_hessian = True
     update_strain = 0
+
+    @staticmethod
+    def resolve(path: str, form: dict) -> None:
+        """Its defaults and rules on a formulation table `form` checked against the schema
+        (InputError naming the key at `path`)."""
+        kind = form["type"]
+        if form["hourglass"] is None:
+            form["hourglass"] = 0.0
+        if form["update_every"] or form["update_strain"]:
+            raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
+        if form["force_form"] != "pair":
+            raise InputError(f"{path}.force_form applies to tlsph and ulsph; {kind} has its own force row")
+        if form["viscosity"] > 0 or form["viscosity_beta"] > 0:
+            raise InputError(f"{path}.viscosity applies to tlsph, ulsph, sph and rlm, not to {kind}")
+        if form["hourglass"] > 0:
+            raise InputError(f"{path}.hourglass applies to tlsph, ulsph, sph and rlm, not to {kind} "
+                             "(give 0 or leave it out)")
+        if form["kernel"] == "eulerian" and form["integration"] == "cells":
+            raise InputError(EULERIAN.format(path=path))
+        if kind != "efg" and form["integration"] is not None:
+            raise InputError(f"{path}.integration applies to type = 'efg'")
+        if kind == "efg":
+            form["integration"] = form["integration"] or "nodal"
+        else:  # absent, as in scenes written before the key existed (checkpoints compare scenes)
+            del form["integration"]
+        if form["hessian"] > 0:
+            raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
+                             f"not to {kind}")
+
+    @staticmethod
+    def updated(form: dict) -> bool:
+        """Whether a formulation table moves its reference (the Eulerian kernel)."""
+        return form.get("kernel") == "eulerian"
+
+    @staticmethod
+    def check_body(body: dict, where: str, scene: dict) -> None:
+        """kbm places its stress points in the cells of a box lattice or of a polar ring
+        (geometry.stress_points), efg with cell integration its Gauss points in cells over a
+        box lattice (geometry.gauss_points); neither has mirror images."""
+        form = body["formulation"]
+        parts = body["parts"]
+        what = {"kbm": "stress points in the cells of", "efg": "Gauss points in background cells over"}[form["type"]]
+        box = len(parts) == 1 and parts[0]["shape"] == "box" and parts[0]["placement"] == "cell"
+        polar = len(parts) == 1 and parts[0]["shape"] == "polar_ring"
+        if form["type"] == "kbm" and not (box or polar):
+            raise InputError(f"formulation.type = 'kbm' places {what} one lattice: {where}.parts must be a single "
+                             "box with placement = 'cell' or a single polar_ring")
+        if form["type"] == "efg" and form["integration"] == "cells" and not box:
+            raise InputError(f"formulation.type = 'efg' places {what} one box lattice: "
+                             f"{where}.parts must be a single box with placement = 'cell'")
+        if scene["symmetry"]:
+            raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' (its "
+                             "shape functions and integration points have no mirror images); model the whole body")
 
     def __init__(self, options: dict, dim: int, law: int, damaged: bool = False):  # damage: particle methods only
         self.type = options["type"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations import tlsph
 from parsph.formulations.base import Stage
@@ -43,10 +44,50 @@ UPDATED_FIELDS = (
     Field("volume_r", "scalar", owner="updated", doc="volume in the updated reference [m^3]"),
 )
 register(*UPDATED_FIELDS)
+EULERIAN = ("{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'kbm' and 'efg' with nodal "
+            "integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
 
 
 class NodalFormulation:
     """One body's formulation: its options and compiled stages."""
+
+    TYPES = ("tlsph", "ulsph", "sph", "rlm")  # formulation.type names it serves
+    damage = True  # tensile damage (materials.damage) at its particles
+
+    @staticmethod
+    def resolve(path: str, form: dict) -> None:
+        """Its defaults and rules on a formulation table `form` checked against the schema
+        (InputError naming the key at `path`)."""
+        kind = form["type"]
+        if form["hourglass"] is None:
+            form["hourglass"] = 50.0 if kind in ("tlsph", "ulsph") else 0.0
+        if kind == "ulsph" and not (form["update_every"] or form["update_strain"]):
+            raise InputError(f"{path}.type = 'ulsph' needs an update trigger: {path}.update_every "
+                             f"(steps) or {path}.update_strain (log strain)")
+        if kind != "ulsph" and (form["update_every"] or form["update_strain"]):
+            raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
+        if kind in ("sph", "rlm") and form["force_form"] != "pair":
+            raise InputError(f"{path}.force_form applies to tlsph and ulsph; {kind} has its own force row")
+        if form["kernel"] == "eulerian" and kind not in ("sph", "rlm"):
+            raise InputError(EULERIAN.format(path=path))
+        if form["integration"] is not None:
+            raise InputError(f"{path}.integration applies to type = 'efg'")
+        del form["integration"]  # absent, as in scenes written before the key existed (checkpoints compare scenes)
+        if kind in ("sph", "rlm") and form["hessian"] > 0:
+            raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
+                             f"not to {kind}")
+
+    @staticmethod
+    def check_body(body: dict, where: str, scene: dict) -> None:
+        """Its rules on a resolved body of the scene: none."""
+
+    @staticmethod
+    def updated(form: dict) -> bool:
+        """Whether a formulation table moves its reference (ulsph, the Eulerian kernel)."""
+        return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
+
+    def build(self, sim, body, kernel: str, search: bool = True) -> None:
+        """Its relations: the particle pairs, which the loop's reference data holds."""
 
     def __init__(self, options: dict, dim: int, law: int, damaged: bool = False):
         self.type = options["type"]
