@@ -379,8 +379,8 @@ def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts") -> list[
 
 
 def _validate_material(path: str, mat: dict) -> None:
-    """The law's constants given, no constant it does not take, finite moduli, and the
-    law's own checks."""
+    """The law's constants given, no constant it does not take, the law's own checks, and
+    finite moduli."""
     law = LAWS[mat["model"]]
     for k in law.takes:
         if mat[k] is None:
@@ -390,6 +390,8 @@ def _validate_material(path: str, mat: dict) -> None:
         if k not in allowed and mat[k] is not None:
             takes = ", ".join(allowed[:-1]) + " and " + allowed[-1]
             raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {takes})")
+    if law.check:
+        law.check(path, mat)
     given = ", ".join(f"{k} = {mat[k]:g}" for k in ("density",) + law.takes)
     try:
         moduli = constants(mat)
@@ -400,8 +402,6 @@ def _validate_material(path: str, mat: dict) -> None:
                               and math.isfinite(speed) and speed > 0.0):
         raise InputError(f"{path}: the moduli or the P-wave speed sqrt((lambda + 2 mu) / density) = {speed:g} m/s "
                          f"are not finite positive numbers in double precision ({given})")
-    if law.check:
-        law.check(path, mat)
 
 
 def _validate_groups(raw: Any, dim: int) -> dict:

@@ -33,32 +33,57 @@ from parsph.materials.law import Law, Plastic, Readout
 
 JOHNSON_COOK = 6
 _SQRT_3_2 = math.sqrt(1.5)
-# constants values: lam, mu, K, then
-A, B, N, C, M, RATE0, ROOM, MELT, HEAT = range(3, 12)  # HEAT = beta / (rho0 c_p)
+# constants values: lam, mu, K, then from BASE on (another law may put them elsewhere)
+A, B, N, C, M, RATE0, ROOM, MELT, HEAT = range(9)  # HEAT = beta / (rho0 c_p)
+BASE = 3
 
 
 @njit(cache=True, inline="always")
-def _thermal(c, plastic_work):
-    """1 - T*^m at the temperature the plastic work w_p has raised (0 once melted)."""
-    t_star = c[HEAT] * plastic_work / (c[MELT] - c[ROOM])
+def _thermal(c, o, plastic_work):
+    """1 - T*^m at the temperature the plastic work w_p has raised (0 once melted); the
+    constants from c[o]."""
+    t_star = c[o + HEAT] * plastic_work / (c[o + MELT] - c[o + ROOM])
     if t_star <= 0.0:
         return 1.0
     if t_star >= 1.0:
         return 0.0
-    return 1.0 - t_star ** c[M]
+    return 1.0 - t_star ** c[o + M]
 
 
 @njit(cache=True, inline="always")
-def _flow(c, eps_bar, step, dt, thermal):
+def _flow(c, o, eps_bar, step, dt, thermal):
     """(sigma_Y, d sigma_Y / d step) at the plastic strain eps_bar + step over the step dt."""
     eps = eps_bar + step
-    hardening = c[A] + c[B] * eps ** c[N]
-    slope = c[N] * c[B] * eps ** (c[N] - 1.0) if eps > 0.0 else math.inf
+    hardening = c[o + A] + c[o + B] * eps ** c[o + N]
+    slope = c[o + N] * c[o + B] * eps ** (c[o + N] - 1.0) if eps > 0.0 else math.inf
     rate, rate_slope = 1.0, 0.0
-    if dt > 0.0 and step > c[RATE0] * dt:
-        rate = 1.0 + c[C] * math.log(step / (c[RATE0] * dt))
-        rate_slope = c[C] / step
+    if dt > 0.0 and step > c[o + RATE0] * dt:
+        rate = 1.0 + c[o + C] * math.log(step / (c[o + RATE0] * dt))
+        rate_slope = c[o + C] / step
     return hardening * rate * thermal, (slope * rate + hardening * rate_slope) * thermal
+
+
+@njit(cache=True, inline="always")
+def return_step(c, o, q, mu, eps_bar, plastic_work, dt):
+    """(d_eps, sigma_Y at its end) of the radial return from the trial von Mises stress q
+    (the module's equation; the constants from c[o], the temperature of `plastic_work`)."""
+    thermal = _thermal(c, o, plastic_work)
+    step = 0.0
+    if q > _flow(c, o, eps_bar, 0.0, dt, thermal)[0]:
+        lo, hi = 0.0, q / (3.0 * mu)  # g(lo) > 0 >= g(hi), g = q - 3 mu step - sigma_Y
+        step = 0.5 * hi
+        for _ in range(100):
+            sigma, slope = _flow(c, o, eps_bar, step, dt, thermal)
+            g = q - 3.0 * mu * step - sigma
+            if g > 0.0:
+                lo = step
+            else:
+                hi = step
+            if abs(g) <= 1e-13 * q or hi - lo <= 1e-15 * hi:
+                break
+            guess = step + g / (3.0 * mu + slope)
+            step = guess if lo < guess < hi else 0.5 * (lo + hi)
+    return step, _flow(c, o, eps_bar, step, dt, thermal)[0]
 
 
 @njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
@@ -69,69 +94,57 @@ def update(F, dim, c, state, trial, i, P, work, dt):
     admissible, theta, norm = predictor(F, dim, mu, state, i, work)
     if not admissible:
         return math.nan
-    eps_bar = state[i, PLASTIC_STRAIN]
-    thermal = _thermal(c, state[i, PLASTIC_WORK])
-    q = _SQRT_3_2 * norm
-    step = 0.0
-    if q > _flow(c, eps_bar, 0.0, dt, thermal)[0]:
-        lo, hi = 0.0, q / (3.0 * mu)  # g(lo) > 0 >= g(hi), g = q - 3 mu step - sigma_Y
-        step = 0.5 * hi
-        for _ in range(100):
-            sigma, slope = _flow(c, eps_bar, step, dt, thermal)
-            g = q - 3.0 * mu * step - sigma
-            if g > 0.0:
-                lo = step
-            else:
-                hi = step
-            if abs(g) <= 1e-13 * q or hi - lo <= 1e-15 * hi:
-                break
-            guess = step + g / (3.0 * mu + slope)
-            step = guess if lo < guess < hi else 0.5 * (lo + hi)
-    sigma = _flow(c, eps_bar, step, dt, thermal)[0]
+    step, sigma = return_step(c, BASE, _SQRT_3_2 * norm, mu, state[i, PLASTIC_STRAIN], state[i, PLASTIC_WORK], dt)
     return corrector(F, dim, mu, bulk, state, trial, i, P, work, theta, norm, step,
                      state[i, PLASTIC_WORK] + sigma * step)
 
 
-def yield_stress(c: np.ndarray, state: np.ndarray) -> np.ndarray:
+def yield_stress(c: np.ndarray, state: np.ndarray, o: int = BASE) -> np.ndarray:
     """The quasi-static flow stress of each row of `state` at its temperature."""
-    t_star = np.clip(c[HEAT] * state[:, PLASTIC_WORK] / (c[MELT] - c[ROOM]), 0.0, 1.0)
-    return (c[A] + c[B] * state[:, PLASTIC_STRAIN] ** c[N]) * (1.0 - t_star ** c[M])
+    t_star = np.clip(c[o + HEAT] * state[:, PLASTIC_WORK] / (c[o + MELT] - c[o + ROOM]), 0.0, 1.0)
+    return (c[o + A] + c[o + B] * state[:, PLASTIC_STRAIN] ** c[o + N]) * (1.0 - t_star ** c[o + M])
 
 
-def temperature(c: np.ndarray, state: np.ndarray) -> np.ndarray:
+def temperature(c: np.ndarray, state: np.ndarray, o: int = BASE) -> np.ndarray:
     """T = T_room + beta w_p / (rho0 c_p) of each row of `state`."""
-    return c[ROOM] + c[HEAT] * state[:, PLASTIC_WORK]
+    return c[o + ROOM] + c[o + HEAT] * state[:, PLASTIC_WORK]
+
+
+def values(m: dict) -> tuple:
+    """(A, B, n, C, m, eps_dot_0, T_room, T_melt, beta / (rho0 c_p)) of a material table."""
+    beta = 0.9 if m["taylor_quinney"] is None else m["taylor_quinney"]
+    return (m["jc_a"], m["jc_b"], m["jc_n"], m["jc_c"] or 0.0, m["jc_m"] or 1.0, m["reference_strain_rate"] or 1.0,
+            m["room_temperature"], m["melting_temperature"], beta / (m["density"] * m["specific_heat"]))
 
 
 def _constants(m: dict):
     """(lam, mu, K, A, B, n, C, m, eps_dot_0, T_room, T_melt, beta / (rho0 c_p))."""
-    heat = m["taylor_quinney"] / (m["density"] * m["specific_heat"])
-    return isotropic(m, (m["jc_a"], m["jc_b"], m["jc_n"], m["jc_c"] or 0.0, m["jc_m"] or 1.0,
-                         m["reference_strain_rate"] or 1.0, m["room_temperature"], m["melting_temperature"], heat))
+    return isotropic(m, values(m))
 
 
-def _check(path: str, m: dict) -> None:
+def check(path: str, m: dict) -> None:
+    """The melting point above the room's."""
     if not m["melting_temperature"] > m["room_temperature"]:
         raise InputError(f"{path}.melting_temperature = {m['melting_temperature']:g} K must be above "
                          f"{path}.room_temperature = {m['room_temperature']:g} K")
 
 
+KEYS = dict(  # the flow stress's (besides the elastic constants)
+    jc_a=Key("float", None, positive, "johnson_cook: A, the yield stress [Pa]"),
+    jc_b=Key("float", None, non_negative, "johnson_cook: B, the strain hardening modulus [Pa]"),
+    jc_n=Key("float", None, positive, "johnson_cook: n, the strain hardening exponent"),
+    jc_c=Key("float", None, non_negative, "johnson_cook: C, the strain rate coefficient (default 0)"),
+    jc_m=Key("float", None, positive, "johnson_cook: m, the thermal softening exponent (default 1)"),
+    reference_strain_rate=Key("float", None, positive, "johnson_cook: eps_dot_0 (default 1) [1/s]"),
+    room_temperature=Key("float", None, positive, "johnson_cook: T_room, the initial temperature [K]"),
+    melting_temperature=Key("float", None, positive, "johnson_cook: T_melt [K]"),
+    specific_heat=Key("float", None, positive, "johnson_cook: c_p [J/(kg K)]"),
+    taylor_quinney=Key("float", None, in_range(0.0, 1.0), "johnson_cook: beta, the share of plastic "
+                       "work turned to heat (Taylor-Quinney; default 0.9)"))
+OPTIONAL = ("jc_c", "jc_m", "reference_strain_rate", "taylor_quinney")
+TEMPERATURE = Readout("K", "temperature (johnson_cook; 0 for the other laws)", temperature)
 LAW = Law(
-    "johnson_cook", JOHNSON_COOK,
-    dict(ISOTROPIC_KEYS,
-         jc_a=Key("float", None, positive, "johnson_cook: A, the yield stress [Pa]"),
-         jc_b=Key("float", None, non_negative, "johnson_cook: B, the strain hardening modulus [Pa]"),
-         jc_n=Key("float", None, positive, "johnson_cook: n, the strain hardening exponent"),
-         jc_c=Key("float", None, non_negative, "johnson_cook: C, the strain rate coefficient (default 0)"),
-         jc_m=Key("float", None, positive, "johnson_cook: m, the thermal softening exponent (default 1)"),
-         reference_strain_rate=Key("float", None, positive, "johnson_cook: eps_dot_0 (default 1) [1/s]"),
-         room_temperature=Key("float", None, positive, "johnson_cook: T_room, the initial temperature [K]"),
-         melting_temperature=Key("float", None, positive, "johnson_cook: T_melt [K]"),
-         specific_heat=Key("float", None, positive, "johnson_cook: c_p [J/(kg K)]"),
-         taylor_quinney=Key("float", None, in_range(0.0, 1.0), "johnson_cook: beta, the share of plastic "
-                            "work turned to heat (Taylor-Quinney; default 0.9)")),
-    lambda m: _constants(dict(m, taylor_quinney=0.9 if m["taylor_quinney"] is None else m["taylor_quinney"])),
-    optional=("jc_c", "jc_m", "reference_strain_rate", "taylor_quinney"), state="plastic_state", check=_check,
-    doc="Johnson & Cook 1983",
+    "johnson_cook", JOHNSON_COOK, dict(ISOTROPIC_KEYS, **KEYS), _constants, optional=OPTIONAL,
+    state="plastic_state", check=check, doc="Johnson & Cook 1983",
     plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state),
-    readouts=dict(READOUTS, temperature=Readout("K", "temperature (johnson_cook; 0 for the other laws)", temperature)))
+    readouts=dict(READOUTS, temperature=TEMPERATURE))

@@ -10,8 +10,9 @@ off it by the internal energy E per unit reference volume with Gamma rho = Gamma
 is the work of the pressure, dE = -p dJ (by the trapezoidal rule over the step, solved with
 p in closed form: p is linear in E), plus the plastic work. The deviatoric part is
 materials.elastoplastic's Hencky law and radial return with the shear modulus and a
-constant yield stress (none: no shear strength once it flows, a fluid). The strain energy
-the balance counts is the deviatoric elastic energy plus the pressure's work.
+constant yield stress (none: no shear strength once it flows, a fluid) or Johnson-Cook's
+flow stress (materials.johnson_cook, given its constants: the impact codes' pairing). The
+strain energy the balance counts is the deviatoric elastic energy plus the pressure's work.
 """
 
 from __future__ import annotations
@@ -21,18 +22,20 @@ import math
 import numpy as np
 from numba import njit
 
+from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.keys import Key, non_negative, positive
+from parsph.materials import johnson_cook
 from parsph.materials.elastoplastic import (COLUMNS, PLASTIC_STRAIN, PLASTIC_WORK, READOUTS, corrector,
                                             initial_state, keep_elastic_state, predictor)
-from parsph.materials.law import Law, Plastic, moduli
+from parsph.materials.law import Law, Plastic, Readout, moduli
 
 MIE_GRUNEISEN = 7
 _SQRT_3_2 = math.sqrt(1.5)
 # state: the elasto-plastic columns, then the pressure's work, J and p of the last evaluation
 ENERGY, LAST_J, PRESSURE = COLUMNS, COLUMNS + 1, COLUMNS + 2
-# constants values: lam, mu, K, then
-YIELD, RHO_C2, SLOPE, GAMMA = 3, 4, 5, 6
+# constants values: lam, mu, K, then (Johnson-Cook's from STRENGTH + 1 when STRENGTH is 1)
+YIELD, RHO_C2, SLOPE, GAMMA, STRENGTH = 3, 4, 5, 6, 7
 
 
 @njit(cache=True, inline="always")
@@ -53,9 +56,14 @@ def update(F, dim, c, state, trial, i, P, work, dt):
     if not admissible:
         return math.nan
     step = 0.0
-    if _SQRT_3_2 * norm > yield_stress:  # perfectly plastic: back to the yield surface
-        step = (_SQRT_3_2 * norm - yield_stress) / (3.0 * mu)
-    plastic_work = state[i, PLASTIC_WORK] + yield_stress * step
+    if c[STRENGTH] > 0.0:
+        step, sigma = johnson_cook.return_step(c, STRENGTH + 1, _SQRT_3_2 * norm, mu, state[i, PLASTIC_STRAIN],
+                                               state[i, PLASTIC_WORK], dt)
+        plastic_work = state[i, PLASTIC_WORK] + sigma * step
+    else:
+        if _SQRT_3_2 * norm > yield_stress:  # perfectly plastic: back to the yield surface
+            step = (_SQRT_3_2 * norm - yield_stress) / (3.0 * mu)
+        plastic_work = state[i, PLASTIC_WORK] + yield_stress * step
     psi = corrector(F, dim, mu, 0.0, state, trial, i, P, work, theta, norm, step, plastic_work)  # deviatoric
     J = math.exp(theta)
     eta = 1.0 - J
@@ -80,15 +88,45 @@ def _initial(n: int) -> np.ndarray:
     return out
 
 
+def _johnson_cook(c: np.ndarray) -> bool:
+    return c[STRENGTH] > 0.0
+
+
 def yield_stress(c: np.ndarray, state: np.ndarray) -> np.ndarray:
+    if _johnson_cook(c):
+        return johnson_cook.yield_stress(c, state, STRENGTH + 1)
     return np.full(len(state), c[YIELD])
 
 
+def temperature(c: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """Johnson-Cook's temperature of the plastic work's heat (0 without its strength)."""
+    if _johnson_cook(c):
+        return johnson_cook.temperature(c, state, STRENGTH + 1)
+    return np.zeros(len(state))
+
+
 def _constants(m: dict):
-    """(lam, mu, K, yield stress, rho0 c0^2, s, Gamma0), K = rho0 c0^2."""
+    """(lam, mu, K, yield stress, rho0 c0^2, s, Gamma0, 0 or 1: Johnson-Cook's strength, and
+    then its constants), K = rho0 c0^2."""
     bulk = m["density"] * m["sound_speed"] ** 2
+    strength = (1.0, *johnson_cook.values(m)) if m.get("jc_a") is not None else (0.0,)
     return moduli((bulk - 2.0 * m["shear_modulus"] / 3.0, m["shear_modulus"], bulk, m["yield_stress"] or 0.0, bulk,
-                   m["hugoniot_slope"], m["gruneisen_gamma"]), m["shear_modulus"], bulk, m["density"])
+                   m["hugoniot_slope"], m["gruneisen_gamma"], *strength), m["shear_modulus"], bulk, m["density"])
+
+
+def _check(path: str, m: dict) -> None:
+    """One strength: a yield stress or Johnson-Cook's constants, whole."""
+    given = [k for k in johnson_cook.KEYS if m[k] is not None]
+    if not given:
+        return
+    if m["yield_stress"] is not None:
+        raise InputError(f"{path}.yield_stress and {path}.{given[0]}: give one strength, a constant yield stress "
+                         "or Johnson-Cook's constants")
+    missing = [k for k in johnson_cook.KEYS if k not in johnson_cook.OPTIONAL and m[k] is None]
+    if missing:
+        raise InputError(f"missing required key '{path}.{missing[0]}' for Johnson-Cook's strength under model "
+                         f"'mie_gruneisen'")
+    johnson_cook.check(path, m)
 
 
 LAW = Law(
@@ -97,9 +135,11 @@ LAW = Law(
      "sound_speed": Key("float", None, positive, "mie_gruneisen: c0 of U_s = c0 + s u_p, the bulk sound speed [m/s]"),
      "hugoniot_slope": Key("float", None, non_negative, "mie_gruneisen: s of U_s = c0 + s u_p"),
      "gruneisen_gamma": Key("float", None, non_negative, "mie_gruneisen: Gamma0, Grüneisen's coefficient"),
-     "yield_stress": Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]")},
-    _constants, optional=("yield_stress",), state="shock_state", doc="Meyers 1994, ch. 4",
-    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state), readouts=READOUTS)
+     "yield_stress": Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
+     **johnson_cook.KEYS},
+    _constants, optional=("yield_stress", *johnson_cook.KEYS), state="shock_state", check=_check,
+    doc="Meyers 1994, ch. 4", plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state),
+    readouts=dict(READOUTS, temperature=Readout("K", johnson_cook.TEMPERATURE.doc, temperature)))
 for _points in ("particles", "stress_points", "gauss_points"):
     register(Field("shock_state", "state", owner="shock_state", points=_points, columns=PRESSURE + 1,
                    initial=lambda X, gid: _initial(len(X)),
