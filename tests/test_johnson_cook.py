@@ -98,7 +98,7 @@ def test_bad_johnson_cook_constants_are_refused(change, message):
 
 
 def impact(*overrides):
-    """runs/taylor_jc.toml at 16 layers (about 430 particles) to 60 us: (history, simulation)."""
+    """runs/taylor_jc.toml at 16 layers (336 particles) to 60 us: (history, simulation)."""
     sim = simulation("taylor_jc", ["parameters.layers=16", "time.end=6e-5", *overrides])
     return run_until(sim, 6e-5, every=20), sim
 
@@ -119,12 +119,13 @@ def test_copper_rod_impact_keeps_the_balance_with_its_heat():
     owned = np.arange(sim.n_owned)
     work, temperature = sim.quantity("plastic_work", owned), sim.quantity("temperature", owned)
     heat = COPPER["taylor_quinney"] / (COPPER["density"] * COPPER["specific_heat"])
-    assert np.allclose(temperature, COPPER["room_temperature"] + heat * work, rtol=1e-14, atol=0.0)
-    assert 100.0 < temperature.max() - COPPER["room_temperature"] < 500.0  # measured 216 K at 50 layers
+    room = sim.scene["material"]["room_temperature"]
+    assert np.allclose(temperature, room + heat * work, rtol=1e-14, atol=0.0)
+    assert 100.0 < temperature.max() - room < 500.0  # measured 265 K at 50 layers
     shortened = {}
     for name, override in (("jc", ()), ("no rate", ("material.jc_c=0.0",)),
                            ("no heat", ("material.taylor_quinney=0.0",))):
         history = h if name == "jc" else impact(*override)[0]
         shortened[name] = history["length"][0] - history["length"][-1]
-    assert shortened["no rate"] > 1.05 * shortened["jc"]  # measured 1.12
-    assert shortened["jc"] > shortened["no heat"]  # measured 1.008 (7.57 against 7.52 mm)
+    assert shortened["no rate"] > 1.05 * shortened["jc"]  # measured 1.14
+    assert shortened["jc"] > shortened["no heat"]  # measured 1.010 (7.93 against 7.85 mm)
