@@ -10,7 +10,7 @@ symmetrised SPH, RLM, KBM with stress points and EFG with nodal and cell integra
 and the Eulerian kernel for SPH, RLM, KBM and nodal EFG (neighbours searched at most every
 30 steps, shape functions rebuilt at every step; timed over a quarter of the steps) (µs
 per particle-step counts particles only, as [R] Tables 5-6 do); and total-Lagrangian with
-alpha = 50 (paper form) with the J2 elasto-plastic law (the return mapping's eigen
+alpha = 50 (paper form) with the J2 and the Johnson-Cook elasto-plastic laws (the return mapping's eigen
 decomposition runs at every particle whether it yields or not) and with tensile damage; and
 total-Lagrangian with alpha = 50 (paper form) as two bodies, the block's halves, in
 contact across the middle (parsph.contact), against the same block as one body, with the
@@ -38,6 +38,8 @@ from parsph.simulation import Simulation
 
 
 LAWS = {"j2_plasticity": {"model": "j2_plasticity", "yield_stress": 1e6},
+        "johnson_cook": {"model": "johnson_cook", "jc_a": 1e6, "jc_b": 1e6, "jc_n": 0.3, "jc_c": 0.01,
+                         "room_temperature": 300.0, "melting_temperature": 1000.0, "specific_heat": 400.0},
         "damage": {"failure_strain": 0.08}}  # over the elastic block's material
 
 
@@ -121,6 +123,7 @@ CASES = (("tlsph", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0)
          ("efg_cells", 0.0, "variational", 0.0, 0), ("sph_eulerian", 0.0, "variational", 0.0, 0),
          ("rlm_eulerian", 0.0, "variational", 0.0, 0), ("kbm_eulerian", 0.0, "variational", 0.0, 0),
          ("efg_eulerian", 0.0, "variational", 0.0, 0), ("tlsph", 50.0, "paper", 0.0, 0, "j2_plasticity"),
+         ("tlsph", 50.0, "paper", 0.0, 0, "johnson_cook"),
          ("tlsph", 50.0, "paper", 0.0, 0, "damage"), ("tlsph", 50.0, "paper", 0.0, 0, "contact"))
 NAMES = {"tlsph": "TL", "sph": "SPH", "rlm": "RLM", "kbm": "KBM", "efg": "EFG nodal", "efg_cells": "EFG cells",
          "sph_eulerian": "SPH Eul.", "rlm_eulerian": "RLM Eul.", "kbm_eulerian": "KBM Eul.",
