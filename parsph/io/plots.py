@@ -62,7 +62,8 @@ def plot_history(path: str, names: list, output: str | None) -> str:
 def plot_snapshots(path: str, field: str, count: int, output: str | None, limits=None) -> str:
     """Particle clouds coloured by `field` at `count` times spread over the run (one: the
     last snapshot; 2D: x-y; 3D: x-z projection), on one scale, side by side, or one above
-    the other for a body more than twice as wide as it is tall."""
+    the other for a body more than twice as wide as it is tall; in 1D the field against x,
+    a curve per time."""
     plt = _pyplot()
     with h5py.File(path, "r") as f:
         steps = sorted(k for k in f if k.startswith("step_"))
@@ -74,6 +75,9 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None, limits
             raise InputError(f"no field '{field}' in {path}; it has: {', '.join(sorted(f[pick[0]]))}")
         frames = [(f[s].attrs["time"], f[s]["position"][()], f[s][field][()]) for s in pick]
     values = [np.linalg.norm(v, axis=1) if v.ndim == 2 else v for _, _, v in frames]
+    if all(np.ptp(x[:, 1:]) == 0 for _, x, _ in frames):  # a line of particles: profiles
+        return _plot_profiles(plt, frames, values, field, output or os.path.splitext(path)[0] + f"_{field}.png",
+                              limits)
     lo, hi = limits if limits else (min(v.min() for v in values), max(v.max() for v in values))
     vertical = 2 if np.ptp(frames[0][1][:, 2]) > 0 else 1
     extent = [max(np.ptp(x[:, k]) for _, x, _ in frames) for k in (0, vertical)]
@@ -99,5 +103,21 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None, limits
         ax.tick_params(labelsize=7)
     fig.colorbar(sc, ax=list(axes), label=field, shrink=0.8)
     output = output or os.path.splitext(path)[0] + f"_{field}.png"
+    fig.savefig(output, dpi=110)
+    return output
+
+
+def _plot_profiles(plt, frames: list, values: list, field: str, output: str, limits=None) -> str:
+    """`field` against x at each time, in one panel (a 1D run's snapshots)."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for (t, x, _), v in zip(frames, values):
+        order = np.argsort(x[:, 0])
+        ax.plot(x[order, 0], v[order], lw=1.2, label=f"t = {t:.4g} s")
+    if limits:
+        ax.set_ylim(*limits)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel(field)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
     fig.savefig(output, dpi=110)
     return output
