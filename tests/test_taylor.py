@@ -7,12 +7,15 @@ held back."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from parsph.diagnostics import global_diagnostics
 from parsph.errors import InputError
-from physics import simulation
+from parsph.io.checkpoint import check_compatible
+from physics import scene_from, simulation
 
 END = 8e-6
 
@@ -105,3 +108,16 @@ def test_viscous_hourglass_force_needs_the_paper_form():
     with pytest.raises(InputError, match="plastic_hourglass = 'viscous'.*hourglass_form = 'paper'"):
         simulation("taylor_impact", ['formulation.hourglass_form="variational"',
                                      "formulation.plastic_hourglass=viscous"])
+
+
+def test_scenes_and_checkpoints_written_with_a_true_or_false_plastic_hourglass_still_read():
+    """formulation.plastic_hourglass was a boolean: true and false read as 'yield_stress'
+    and 'elastic', in a scene and in a checkpoint's stored scene, which a restart compares."""
+    for old, new in ((True, "yield_stress"), (False, "elastic")):
+        scene = scene_from("taylor_impact", [f"formulation.plastic_hourglass={str(old).lower()}"])
+        assert scene["formulation"]["plastic_hourglass"] == new
+        stored = json.loads(json.dumps(scene))
+        stored["formulation"]["plastic_hourglass"] = old  # as a checkpoint written before wrote it
+        check_compatible(stored, scene, "checkpoint.h5")
+    with pytest.raises(InputError, match="differs from checkpoint checkpoint.h5 in formulation.plastic_hourglass"):
+        check_compatible(stored, scene_from("taylor_impact"), "checkpoint.h5")
