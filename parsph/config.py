@@ -864,7 +864,7 @@ def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
 
 def _kept_lists(form: dict) -> bool:
     """Whether a resolved formulation keeps its neighbour lists between reference updates."""
-    return FORMULATIONS[form["type"]].updated(form)
+    return FORMULATIONS[form["type"]].moves_reference(form)
 
 
 def search_every(form: dict, symmetry: bool = False) -> int:
@@ -894,8 +894,6 @@ def _value_or_expression(path: str, item: dict, raw: dict, dim: int) -> None:
         _check_expressions(path, item["expression"], raw, dim)
     else:
         _vector_len(f"{path}.value", item["value"], dim)
-
-
 
 
 def parse_override(text: str) -> tuple[list[str | int], Any]:

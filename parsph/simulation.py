@@ -121,12 +121,13 @@ class Simulation:
             float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
             config.search_every(kept, bool(scene["symmetry"])))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
-        owners = {f.type for f in forms} | {b.law.name for b in self.bodies} | {b.law.state for b in self.bodies}
+        # the formulations, laws and their states, the updated reference and damage the bodies use
+        self.owners = {f.type for f in forms} | {b.law.name for b in self.bodies} | {b.law.state for b in self.bodies}
         if self.updated:
-            owners.add("updated")
+            self.owners.add("updated")
         if any(b.failure_strain is not None for b in self.bodies):
-            owners.add("damage")
-        self.carried = fields.carried(owners)  # the registered fields the particles carry
+            self.owners.add("damage")
+        self.carried = fields.carried(self.owners)  # the registered fields the particles carry
         self.rebalance = scene["parallel"]["rebalance"]
         self.group_names = sorted(scene["groups"])
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
@@ -386,9 +387,7 @@ class Simulation:
         carries, work arrays and halo plan; each body's rows of it."""
         dim, fl = self.dim, local.fields
         rows = local.n_owned + local.n_ghost
-        owners = {b.formulation.type for b in self.bodies} | {b.law.name for b in self.bodies} | \
-            {b.law.state for b in self.bodies}
-        carried = fields.carried(owners | ({"updated"} if self.updated else set()), name)
+        carried = fields.carried(self.owners, name)
         arrays = self._with_trials({field: self._initial(field, fl, rows, name) for field in carried}, name)
         arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
                       psi=np.zeros(rows))

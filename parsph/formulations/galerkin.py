@@ -187,7 +187,7 @@ class GalerkinFormulation:
                              f"not to {kind}")
 
     @staticmethod
-    def updated(form: dict) -> bool:
+    def moves_reference(form: dict) -> bool:
         """Whether a formulation table moves its reference (the Eulerian kernel)."""
         return form.get("kernel") == "eulerian"
 

@@ -82,7 +82,7 @@ class NodalFormulation:
         """Its rules on a resolved body of the scene: none."""
 
     @staticmethod
-    def updated(form: dict) -> bool:
+    def moves_reference(form: dict) -> bool:
         """Whether a formulation table moves its reference (ulsph, the Eulerian kernel)."""
         return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
 

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import os
 
-import h5py
 import numpy as np
 
 from parsph.errors import InputError
 from parsph.io.history import read_units
-from parsph.io.results import read_history
+from parsph.io.results import read_history, read_snapshots, snapshot_steps
 
 
 def _pyplot():
@@ -65,15 +64,12 @@ def plot_snapshots(path: str, field: str, count: int, output: str | None, limits
     the other for a body more than twice as wide as it is tall; in 1D the field against x,
     a curve per time."""
     plt = _pyplot()
-    with h5py.File(path, "r") as f:
-        steps = sorted(k for k in f if k.startswith("step_"))
-        if not steps:
-            raise InputError(f"{path} holds no snapshots")
-        first = 0 if count > 1 else len(steps) - 1  # one frame: the last
-        pick = [steps[i] for i in np.unique(np.linspace(first, len(steps) - 1, count).round().astype(int))]
-        if field not in f[pick[0]]:
-            raise InputError(f"no field '{field}' in {path}; it has: {', '.join(sorted(f[pick[0]]))}")
-        frames = [(f[s].attrs["time"], f[s]["position"][()], f[s][field][()]) for s in pick]
+    steps = snapshot_steps(path)
+    if not steps:
+        raise InputError(f"{path} holds no snapshots")
+    first = 0 if count > 1 else len(steps) - 1  # one frame: the last
+    pick = np.unique(np.linspace(first, len(steps) - 1, count).round().astype(int)).tolist()
+    frames = [(s.time, s["position"], s[field]) for s in read_snapshots(path, ("position", field), which=pick)]
     values = [np.linalg.norm(v, axis=1) if v.ndim == 2 else v for _, _, v in frames]
     if all(np.ptp(x[:, 1:]) == 0 for _, x, _ in frames):  # a line of particles: profiles
         return _plot_profiles(plt, frames, values, field, output or os.path.splitext(path)[0] + f"_{field}.png",

@@ -239,6 +239,7 @@ def _check(path: str, material: dict) -> None:
 
 
 J2_PLASTICITY = 5
+YIELD_STRESS = Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]")
 READOUTS = {  # of the laws with this state
     "plastic_strain": Readout("1", "equivalent plastic strain (0 for elastic laws)",
                               lambda c, state: state[:, PLASTIC_STRAIN]),
@@ -247,7 +248,7 @@ READOUTS = {  # of the laws with this state
 LAW = Law(
     "j2_plasticity", J2_PLASTICITY,
     dict(ISOTROPIC_KEYS,
-         yield_stress=Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
+         yield_stress=YIELD_STRESS,
          hardening_modulus=Key("float", None, None, "j2_plasticity: H = d sigma_Y / d eps_bar, negative for "
                                "softening (default 0: perfectly plastic) [Pa]")),
     lambda m: isotropic(m, (m["yield_stress"], m.get("hardening_modulus") or 0.0)),

@@ -26,7 +26,8 @@ from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.keys import Key, non_negative, positive
 from parsph.materials import johnson_cook
-from parsph.materials.elastoplastic import (COLUMNS, PLASTIC_STRAIN, PLASTIC_WORK, READOUTS, corrector,
+from parsph.materials.elastic import SHEAR_MODULUS
+from parsph.materials.elastoplastic import (COLUMNS, PLASTIC_STRAIN, PLASTIC_WORK, READOUTS, YIELD_STRESS, corrector,
                                             initial_state, keep_elastic_state, predictor)
 from parsph.materials.law import Law, Plastic, Readout, moduli
 
@@ -131,11 +132,11 @@ def _check(path: str, m: dict) -> None:
 
 LAW = Law(
     "mie_gruneisen", MIE_GRUNEISEN,
-    {"shear_modulus": Key("float", None, positive, "[Pa]"),
+    {"shear_modulus": SHEAR_MODULUS,
      "sound_speed": Key("float", None, positive, "mie_gruneisen: c0 of U_s = c0 + s u_p, the bulk sound speed [m/s]"),
      "hugoniot_slope": Key("float", None, non_negative, "mie_gruneisen: s of U_s = c0 + s u_p"),
      "gruneisen_gamma": Key("float", None, non_negative, "mie_gruneisen: Gamma0, Grüneisen's coefficient"),
-     "yield_stress": Key("float", None, positive, "j2_plasticity: initial von Mises yield stress [Pa]"),
+     "yield_stress": YIELD_STRESS,
      **johnson_cook.KEYS},
     _constants, optional=("yield_stress", *johnson_cook.KEYS), state="shock_state", check=_check,
     doc="Meyers 1994, ch. 4", plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state),
