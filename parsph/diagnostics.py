@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from parsph.exact_sum import SCALE, Exact, totals
+from parsph.ledger import TERMS
 from parsph.rigid import moments
 
 
@@ -121,68 +122,52 @@ def probe_parts(probes: list, state, reduction: RowReduction):
 
 
 def global_parts(state, reduction: RowReduction):
-    """This rank's parts of the energies, momenta and disorder of all bodies together, and
-    with more than one body of each body's energies. Returns the function that gives them
-    as "NAME" and "NAME.BODY" once `reduction` is reduced."""
+    """This rank's parts of the energies (the ledger's terms: parsph.ledger), momenta and
+    disorder of all bodies together, and with more than one body of each body's energies.
+    Returns the function that gives them as "NAME" and "NAME.BODY" once `reduction` is
+    reduced."""
     dim = state.dim
     eta = state.disorder()
     columns = particle_columns(state.mass, state.v, state.X, state.u, eta)
-    energies = state.energy_items()
+    energies = state.ledger.items(state)
     bodies = state.bodies
-    keys = ("strain", "plastic", "damage", "viscous", "hourglass", "contact", "contact_work", "external")
     start = reduction.add_sums([columns])
-    terms = {key: [(reduction.add_sums(body), len(body)) for body in energies[key]] for key in keys}
+    terms = {t.key: [(reduction.add_sums(body), len(body)) for body in energies[t.key]] for t in TERMS}
     kinetic_at = reduction.add_sums([columns[b.lo:b.hi, 2:2 + dim] for b in bodies]) if len(bodies) > 1 else 0
     top = reduction.add_max([eta.max() if len(eta) else 0.0])
+    shown = [t for t in TERMS if t.shown(state)]
+
+    def balance(kinetic: Exact, parts: dict) -> Exact:
+        out = kinetic
+        for t in TERMS:
+            out = out + parts[t.key] if t.sign > 0 else out - parts[t.key]
+        return out
 
     def values() -> dict:
         parts = reduction.sums
-        count = len(bodies)
         weighted, mass, kinetic, momentum, angular = (
             parts[start], parts[start + 1], parts[start + 2:start + 2 + dim],
             parts[start + 2 + dim:start + 2 + 2 * dim], parts[start + 2 + 2 * dim:start + columns.shape[1]])
-        strain, plastic, damaged, viscous, hourglass, contact, contact_work, external = (
-            [sum(parts[k:k + size], Exact(0)) for k, size in terms[key]] for key in keys)
-        per_body_kinetic = parts[kinetic_at:kinetic_at + dim * count]
+        per_body = {key: [sum(parts[k:k + size], Exact(0)) for k, size in where] for key, where in terms.items()}
         kinetic = sum(kinetic[1:], kinetic[0])
-        strain_all, plastic_all, damage_all, viscous_all, hourglass_all, contact_all, contact_work_all, external_all = (
-            sum(e[1:], e[0]) for e in (strain, plastic, damaged, viscous, hourglass, contact, contact_work, external))
-        out = {
-            "kinetic_energy": float(kinetic), "strain_energy": float(strain_all), "plastic_work": float(plastic_all),
-            "damage_work": float(damage_all), "viscous_work": float(viscous_all),
-            "hourglass_energy": float(hourglass_all), "external_work": float(external_all),
-            "total_energy": float(kinetic + strain_all + plastic_all + damage_all + viscous_all + hourglass_all
-                                  + contact_all + contact_work_all - external_all),
-            "disorder": math.sqrt(float(weighted) / float(mass)),
-            "disorder_max": reduction.maxima[top],
-        }
-        if state.contact:
-            out["contact_energy"] = float(contact_all)
-            if state.contact.dissipative:
-                out["contact_work"] = float(contact_work_all)
+        whole = {key: sum(values[1:], values[0]) for key, values in per_body.items()}
+        out = {"kinetic_energy": float(kinetic)}
+        out.update((t.column, float(whole[t.key])) for t in shown)
+        out.update(total_energy=float(balance(kinetic, whole)), disorder=math.sqrt(float(weighted) / float(mass)),
+                   disorder_max=reduction.maxima[top])
         for a, name in enumerate("xyz"[:dim]):
             out[f"momentum_{name}"] = float(momentum[a])
         if dim == 2:
             out["angular_momentum"] = float(angular[0])
         for a, name in enumerate("xyz" if dim == 3 else ""):
             out[f"angular_momentum_{name}"] = float(angular[a])
-        if count > 1:
+        if len(bodies) > 1:
             for k, b in enumerate(bodies):
-                comps = per_body_kinetic[k * dim:(k + 1) * dim]
+                comps = parts[kinetic_at + k * dim:kinetic_at + (k + 1) * dim]
                 kin = sum(comps[1:], comps[0])
                 out[f"kinetic_energy.{b.name}"] = float(kin)
-                out[f"strain_energy.{b.name}"] = float(strain[k])
-                out[f"plastic_work.{b.name}"] = float(plastic[k])
-                out[f"damage_work.{b.name}"] = float(damaged[k])
-                out[f"viscous_work.{b.name}"] = float(viscous[k])
-                out[f"hourglass_energy.{b.name}"] = float(hourglass[k])
-                out[f"external_work.{b.name}"] = float(external[k])
-                if state.contact:
-                    out[f"contact_energy.{b.name}"] = float(contact[k])
-                    if state.contact.dissipative:
-                        out[f"contact_work.{b.name}"] = float(contact_work[k])
-                out[f"total_energy.{b.name}"] = float(kin + strain[k] + plastic[k] + damaged[k] + viscous[k]
-                                                      + hourglass[k] + contact[k] + contact_work[k] - external[k])
+                out.update((f"{t.column}.{b.name}", float(per_body[t.key][k])) for t in shown)
+                out[f"total_energy.{b.name}"] = float(balance(kin, {key: v[k] for key, v in per_body.items()}))
         return out
 
     return values

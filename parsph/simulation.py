@@ -37,8 +37,9 @@ from parsph.collocation import BoundaryCollocation, collocated
 from parsph.contact import Contact
 from parsph.diagnostics import RowReduction, contact_parts, global_parts, probe_parts, rigid_parts
 from parsph.errors import InputError, ParsphError
-from parsph.exact_sum import Accumulator, Exact, allsum, totals
+from parsph.exact_sum import allsum
 from parsph.formulations import FORMULATIONS, reference, tlsph
+from parsph.ledger import Ledger
 from parsph.materials import damage, update
 from parsph.neighbors import crossing, find_pairs, pair_keys
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
@@ -52,11 +53,6 @@ from parsph.walls import Walls
 
 BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
 UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
-TOTALS = ("hourglass_work",  # absorbed by the "paper" hourglass forces
-          "viscous_work",  # absorbed by the artificial viscosity
-          "contact_work",  # absorbed by contact damping and friction
-          "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
-          "external_work")
 
 
 def _breakdown(J: float) -> str:
@@ -139,8 +135,7 @@ class Simulation:
         self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
         self.updates = 0  # reference updates so far
         self.since_update = 0  # steps since the last one
-        # running totals of the work done on this rank's particles of each body, exact (exact_sum)
-        self.totals = {name: [Accumulator() for _ in self.bodies] for name in TOTALS}
+        self.ledger = Ledger(self.bodies)
         self.walls = Walls(scene["walls"], scene["tools"], dim)
         self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
         self._adopt(local)
@@ -159,17 +154,12 @@ class Simulation:
             self.step_dt = clock.get("step_dt", 0.0)
             self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
-                for name, accs in self.totals.items():
-                    if name not in carried:  # a checkpoint from before this total existed: none so far
-                        continue
-                    saved = carried[name] if len(accs) > 1 else [carried[name]]
-                    for acc, value in zip(accs, saved):
-                        acc.set([Exact.from_json(value)])
+                self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"])
         self._cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up, for messages
         self._floor = 0.0  # the smallest stable step allowed (time.step_floor), set below
         self.compute_forces()
-        self._external = self.external_force()  # at the current state, for the work integral
+        self.ledger.external = self.external_force()  # at the current state, for the work integral
         if scene["time"]["dt"] > 0:
             self._cfl_at = (scene["time"]["cfl"] * self._stability()[0], self.step_count)
         self._stable_dt = restart["clock"]["dt"] if restart else self.stable_time_step()[0]
@@ -368,12 +358,11 @@ class Simulation:
             b.law.plastic.keep_elastic(self.material_state(b)[0][b.lo:b.hi], F_old[b.lo:b.hi], self.F[b.lo:b.hi])
         if plastic:
             self.compute_forces()
-        for b in self.bodies:
-            self.totals["hourglass_released"][b.index].add(penalty[b.lo:b.hi] - self.hg_psi[b.lo:b.hi])
+        self.ledger.add("hourglass_released", penalty[:n] - self.hg_psi[:n])
         trial[:, damage.WORK] = work
         self._commit_states()
         self._find_broken()
-        self._external = self.external_force()
+        self.ledger.external = self.external_force()
 
     def _exclude_kernel_pairs(self) -> None:
         """Tell a self-contact the kernel's pairs (of the owned rows), which it leaves out."""
@@ -687,15 +676,9 @@ class Simulation:
         self._commit(dt)
         if self.breaking:
             self._break_pairs()
-        u_old = self.u[:n].copy()
-        v_old = self.v[:n].copy() if self.bcs.moving or self.collocation else None
-        f_hg_old = self.f_hg.copy()
-        f_visc_old = self.f_visc.copy()
-        dissipating = self.contact is not None and self.contact.dissipative
-        if dissipating:
-            f_cd_old = self.contact.dissipation.copy()
+        if self.contact is not None and self.contact.dissipative:  # friction's limit
             self.contact.dt = dt
-        f_ext_old = self._external
+        self.ledger.begin(self)
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t + 0.5 * dt)
         self.u[:n] += dt * self.v[:n]
@@ -703,40 +686,15 @@ class Simulation:
             body.drift(dt, self.X, self.u, self.v, self.F)
         self.t = t_new
         self._prescribe_displacement(self.t)
-        force_old = self.force
         if self.walls.items:  # the obstacles' changes of velocity and displacement
             v_half, u_drift = self.v[:n].copy(), self.u[:n].copy()
             self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
-            contact = (v_half, self.v[:n] - v_half, self.u[:n] - u_drift)
+            self.ledger.obstacles_moved(self, v_half, u_drift)
         self.step_dt = dt
         self.compute_forces(move_reference=self.eulerian)
         self._kick(0.5 * dt)
         self._prescribe_velocity(self.t)
-        du = self.u[:n] - u_old
-        paper = [b for b in self.bodies if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER]
-        if paper:  # not a potential force: its energy is the work it has absorbed
-            work = -0.5 * (f_hg_old + self.f_hg) * du
-            for b in paper:
-                self.totals["hourglass_work"][b.index].add(work[b.lo:b.hi])
-        if self.viscous:  # dissipated: the work the viscous forces have absorbed
-            work = -0.5 * (f_visc_old + self.f_visc) * du
-            for b in self.bodies:
-                self.totals["viscous_work"][b.index].add(work[b.lo:b.hi])
-        if dissipating:  # and by contact damping and friction
-            work = -0.5 * (f_cd_old + self.contact.dissipation) * du
-            for b in self.bodies:
-                self.totals["contact_work"][b.index].add(work[b.lo:b.hi])
-        self._external = self.external_force()
-        work = 0.5 * (f_ext_old + self._external) * du
-        if self.walls.items:
-            work = work + self._contact_work(dt, *contact, force_old)
-        for b in self.bodies:
-            self.totals["external_work"][b.index].add(work[b.lo:b.hi])
-        if v_old is not None:  # and the work that changes the kinetic energy of a prescribed motion
-            v = self.v[:n]
-            kinetic = np.where(self.bcs.mask, 0.5 * self.mass[:n, None] * (v * v - v_old * v_old), 0.0)
-            for b in self.bodies:
-                self.totals["external_work"][b.index].add(kinetic[b.lo:b.hi])
+        self.ledger.end(self, dt)
         self.step_count += 1
         self.since_update += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
@@ -755,23 +713,12 @@ class Simulation:
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
 
-    def _contact_work(self, dt: float, v_half: np.ndarray, dv: np.ndarray, du: np.ndarray,
-                      force_old: np.ndarray) -> np.ndarray:
-        """The work of the obstacles in the step (per particle and component) as the
-        kick-drift-kick scheme sees it: the kinetic energy their velocity change dv takes
-        from the mid-step velocity v_half, with the second half kick's share dt/2 f_(n+1) . dv,
-        and the work -(f_n + f_(n+1))/2 . du of the step's forces over the displacement du by
-        which they put particles back on their surfaces (zero where there was no contact).
-        For a particle held at rest on a wall it is zero."""
-        kinetic = 0.5 * self.mass[: self.n_owned, None] * dv * (2.0 * v_half + dv)
-        return kinetic + 0.5 * dt * self.force * dv - 0.5 * (force_old + self.force) * du
-
     def update_reference(self) -> None:
         """Make the current configuration the reference [V §3.1] between steps
         (_move_reference) and evaluate the forces in it."""
         self._move_reference()
         self.compute_forces()
-        self._external = self.external_force()
+        self.ledger.external = self.external_force()
 
     def _move_reference(self) -> bool:
         """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
@@ -784,7 +731,7 @@ class Simulation:
         start = time.perf_counter()
         for b in self.bodies:  # the penalty restarts at 0
             if b.moves:
-                self.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
+                self.ledger.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
         n = self.n_owned
         moved = {name: self._moved(name) for name in self.sets}  # stress points at the current configuration
         x = self.X[:n] + self.u[:n] if self.all_move else \
@@ -910,14 +857,10 @@ class Simulation:
         """Everything io.checkpoint stores (collective: totals): per-particle arrays of the
         owned particles (with the updated reference, if any); the accumulated totals over all
         ranks, exact (exact_sum.Exact.to_json), and the last step's obstacle forces."""
-        sums = allsum(self.comm, [acc.sums()[0] for accs in self.totals.values() for acc in accs])
-        per_body = [sums[k: k + len(self.bodies)] for k in range(0, len(sums), len(self.bodies))]
-        totals = {name: [s.to_json() for s in values] if len(values) > 1 else values[0].to_json()
-                  for name, values in zip(self.totals, per_body)}
         return {
             "fields": self.particles.checkpointed(), "group_names": self.group_names,
             "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in self.point_sets()[1:]},
-            "totals": {**totals, "wall_force": self.wall_forces().tolist(),
+            "totals": {**self.ledger.checkpoint(self.comm), "wall_force": self.wall_forces().tolist(),
                        "rigid": [body.state() for body in self.rigid_bodies]},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "step_dt": self.step_dt,
                       "updates": self.updates, "since_update": self.since_update, "first_stable": self._first_stable},
@@ -1002,56 +945,6 @@ class Simulation:
         s = self.cauchy_stress(sel, full=True)
         dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
         return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
-
-    def energy_items(self) -> dict:
-        """What this rank sums for the energies of each body (arrays, or exact_sum.Exact
-        running totals): strain (V^0 psi of the owned integration points), plastic work
-        (V^0 w_p), damage work (the work the particles have taken beyond their strain energy
-        and plastic work, V^0 (W - psi - w_p): materials.damage), viscous work (absorbed by
-        the artificial viscosity), hourglass (the particles' penalty, the work absorbed on
-        this rank by the paper form, the penalty released since), contact
-        (each particle's half of its pairs' potential: parsph.contact), contact work
-        (absorbed by contact damping and friction) and external work."""
-        out = {"strain": [], "plastic": [], "damage": [], "viscous": [], "hourglass": [], "contact": [],
-               "contact_work": [], "external": []}
-        for b in self.bodies:
-            lo, hi = b.lo, b.hi
-            acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            out["strain"].append([b.formulation.integrated(self, b, lambda A: A["psi"])])
-            out["plastic"].append([] if not b.law.plastic else [b.formulation.integrated(
-                self, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work])])
-            out["damage"].append([] if b.failure_strain is None else [self.volume[lo:hi] * self._damage_work(b)])
-            out["viscous"].append([acc["viscous_work"]])
-            out["hourglass"].append([self.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
-            out["contact"].append([self.contact.energy[lo:hi]] if self.contact else [])
-            out["contact_work"].append([acc["contact_work"]] if self.contact and self.contact.dissipative else [])
-            out["external"].append([acc["external_work"]])
-        return out
-
-    def _damage_work(self, b: Body) -> np.ndarray:
-        """W - psi - w_p at `b`'s owned particles: the work they have taken (materials.damage)
-        beyond their strain energy and, with a plastic law, their plastic work (counted as such)."""
-        lo, hi = b.lo, b.hi
-        out = self.damage_state(b)[1][lo:hi, damage.WORK] - self.psi[lo:hi]
-        if b.law.plastic:
-            out = out - self.material_state(b)[1][lo:hi, b.law.plastic.work]
-        return out
-
-    def energy_sums(self) -> dict:
-        """This rank's parts of the energies of each body, exact (energy_items summed)."""
-        return {key: [sum(totals(body), Exact(0)) for body in parts] for key, parts in self.energy_items().items()}
-
-    @property
-    def strain_energy_local(self) -> float:
-        """This rank's strain energy (energy_sums)."""
-        parts = self.energy_sums()["strain"]
-        return float(sum(parts[1:], parts[0]))
-
-    @property
-    def hourglass_energy_local(self) -> float:
-        """This rank's hourglass energy (energy_sums)."""
-        parts = self.energy_sums()["hourglass"]
-        return float(sum(parts[1:], parts[0]))
 
     def wall_forces(self) -> np.ndarray:
         """Each wall's and tool's force on the body in the last step, (obstacles, dim), exact

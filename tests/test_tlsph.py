@@ -90,7 +90,7 @@ def test_rigid_rotation_by_90_degrees_gives_no_strain_or_stress(model, dim):
     assert np.abs(sim.F[:n] - R).max() < 1e-13
     assert np.abs(sim.VP[:n]).max() < 1e-6  # stress [Pa] x volume, moduli ~1e6 Pa
     assert np.abs(sim.force).max() < 1e-6
-    assert abs(sim.strain_energy_local) < 1e-12 * 1e6 * sim.volume.sum()  # round-off of mu V
+    assert abs(sim.ledger.local(sim, "strain")) < 1e-12 * 1e6 * sim.volume.sum()  # round-off of mu V
     assert np.abs(sim.disorder()).max() < 1e-13
 
 

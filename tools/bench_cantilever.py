@@ -113,7 +113,7 @@ def run(method: str, n: int) -> dict:
         sim.step(end)
     seconds = time.process_time() - start
     kinetic = float(0.5 * np.sum(sim.mass[:sim.n_owned, None] * sim.v[:sim.n_owned] ** 2))
-    strain = sim.strain_energy_local
+    strain = sim.ledger.local(sim, "strain")
     row = {"method": method, "n": n, "particles": sim.n_owned, "spacing": scene["parameters"]["D"] / n,
            "steps": sim.step_count, "cpu_seconds": seconds, "kinetic_energy": kinetic, "strain_energy": strain,
            "relaxed": bool(kinetic <= REST * strain), "l2": None, "energy": None, "tip": None}

@@ -156,7 +156,7 @@ class NodalFormulation:
                     if changed.any():
                         ratio = modulus / np.where(changed, old, 1.0)
                         drop = np.where(changed, sim.hg_psi[lo:hi] * (1.0 - ratio), 0.0)
-                        sim.totals["hourglass_released"][body.index].add(drop)
+                        sim.ledger.totals["hourglass_released"][body.index].add(drop)
                 sim.youngs[lo:hi] = modulus
             out.append(Stage("kinematics+stress", hourglass_modulus, writes=("youngs",)))
         if hessian:

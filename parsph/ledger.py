@@ -1,0 +1,172 @@
+"""The energy ledger: every term of the energy balance declared once (`TERMS`), the work
+accumulated step by step (running totals per body, exact: exact_sum) and what each rank
+sums for the history (diagnostics.global_parts).
+
+The balance: kinetic + strain + plastic + damage + viscous + hourglass + contact
++ contact work - external work is constant. The works are integrated by the trapezoidal
+rule over each step's displacement, as the kick-drift-kick scheme moves the particles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parsph.exact_sum import Accumulator, Exact, allsum, totals
+from parsph.formulations import tlsph
+from parsph.materials import damage
+
+RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
+           "viscous_work",  # absorbed by the artificial viscosity
+           "contact_work",  # absorbed by contact damping and friction
+           "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
+           "external_work")
+
+
+@dataclass(frozen=True)
+class Term:
+    """A term of the balance: its key in Ledger.items, its history column, its sign in the
+    total energy and whether the scene has it (a predicate of the simulation)."""
+
+    key: str
+    column: str
+    sign: float = 1.0
+    present: object = None
+
+    def shown(self, sim) -> bool:
+        return self.present is None or self.present(sim)
+
+
+TERMS = (
+    Term("strain", "strain_energy"),
+    Term("plastic", "plastic_work"),
+    Term("damage", "damage_work"),
+    Term("viscous", "viscous_work"),
+    Term("hourglass", "hourglass_energy"),
+    Term("external", "external_work", -1.0),
+    Term("contact", "contact_energy", present=lambda sim: sim.contact is not None),
+    Term("contact_work", "contact_work", present=lambda sim: sim.contact is not None and sim.contact.dissipative),
+)
+
+
+class Ledger:
+    """The running totals of the work done on this rank's particles of each body, and the
+    forces of the step's start that the trapezoidal rule needs."""
+
+    def __init__(self, bodies: list):
+        self.bodies = bodies
+        self.totals = {name: [Accumulator() for _ in bodies] for name in RUNNING}
+        self.external = None  # body force, tractions and reactions at the current state
+        self._start = None
+
+    def add(self, name: str, values: np.ndarray) -> None:
+        """Add each body's rows of per-particle `values` (owned rows) to running total `name`."""
+        for b in self.bodies:
+            self.totals[name][b.index].add(values[b.lo:b.hi])
+
+    def restore(self, carried: dict) -> None:
+        """The global totals of a checkpoint (rank 0 carries them); a total the checkpoint
+        predates starts at zero."""
+        for name, accs in self.totals.items():
+            if name in carried:
+                saved = carried[name] if len(accs) > 1 else [carried[name]]
+                for acc, value in zip(accs, saved):
+                    acc.set([Exact.from_json(value)])
+
+    def checkpoint(self, comm) -> dict:
+        """The totals over all ranks, exact (exact_sum.Exact.to_json) (collective)."""
+        count = len(self.bodies)
+        sums = allsum(comm, [acc.sums()[0] for accs in self.totals.values() for acc in accs])
+        per_body = [sums[k: k + count] for k in range(0, len(sums), count)]
+        return {name: [s.to_json() for s in values] if count > 1 else values[0].to_json()
+                for name, values in zip(self.totals, per_body)}
+
+    def begin(self, sim) -> None:
+        """Keep what the step's works need from its start (after the commit, before the kick)."""
+        n = sim.n_owned
+        dissipating = sim.contact is not None and sim.contact.dissipative
+        self._start = dict(u=sim.u[:n].copy(), v=sim.v[:n].copy() if sim.bcs.moving or sim.collocation else None,
+                           f_hg=sim.f_hg.copy(), f_visc=sim.f_visc.copy(), force=sim.force,
+                           f_cd=sim.contact.dissipation.copy() if dissipating else None, external=self.external,
+                           obstacles=None)
+
+    def obstacles_moved(self, sim, v_half: np.ndarray, u_drift: np.ndarray) -> None:
+        """Keep the changes the obstacles made to the mid-step velocity v_half and the
+        drifted displacement u_drift (parsph.walls)."""
+        n = sim.n_owned
+        self._start["obstacles"] = (v_half, sim.v[:n] - v_half, sim.u[:n] - u_drift)
+
+    def end(self, sim, dt: float) -> None:
+        """Add the step's works (after the second kick): the paper hourglass forces', the
+        viscous forces', contact damping's and friction's (all absorbed), the external
+        forces' and obstacles', and the work that changes the kinetic energy of a
+        prescribed motion."""
+        n, start = sim.n_owned, self._start
+        du = sim.u[:n] - start["u"]
+        for b in sim.bodies:
+            if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER:  # not a potential force
+                work = -0.5 * (start["f_hg"][b.lo:b.hi] + sim.f_hg[b.lo:b.hi]) * du[b.lo:b.hi]
+                self.totals["hourglass_work"][b.index].add(work)
+        if sim.viscous:
+            self.add("viscous_work", -0.5 * (start["f_visc"] + sim.f_visc) * du)
+        if start["f_cd"] is not None:
+            self.add("contact_work", -0.5 * (start["f_cd"] + sim.contact.dissipation) * du)
+        self.external = sim.external_force()
+        work = 0.5 * (start["external"] + self.external) * du
+        if start["obstacles"] is not None:
+            work = work + self._obstacle_work(sim, dt, *start["obstacles"], start["force"])
+        self.add("external_work", work)
+        if start["v"] is not None:
+            v, v_old = sim.v[:n], start["v"]
+            self.add("external_work", np.where(sim.bcs.mask, 0.5 * sim.mass[:n, None] * (v * v - v_old * v_old), 0.0))
+        self._start = None
+
+    @staticmethod
+    def _obstacle_work(sim, dt: float, v_half: np.ndarray, dv: np.ndarray, du: np.ndarray,
+                       force_old: np.ndarray) -> np.ndarray:
+        """The work of the obstacles in the step (per particle and component) as the
+        kick-drift-kick scheme sees it: the kinetic energy their velocity change dv takes
+        from the mid-step velocity v_half, with the second half kick's share dt/2 f_(n+1) . dv,
+        and the work -(f_n + f_(n+1))/2 . du of the step's forces over the displacement du by
+        which they put particles back on their surfaces (zero where there was no contact).
+        For a particle held at rest on a wall it is zero."""
+        kinetic = 0.5 * sim.mass[: sim.n_owned, None] * dv * (2.0 * v_half + dv)
+        return kinetic + 0.5 * dt * sim.force * dv - 0.5 * (force_old + sim.force) * du
+
+    def items(self, sim) -> dict:
+        """What this rank sums for each term of each body (arrays, or exact_sum.Exact running
+        totals): strain (V^0 psi of the owned integration points), plastic work (V^0 w_p),
+        damage work (the work the particles have taken beyond their strain energy and
+        plastic work, V^0 (W - psi - w_p): materials.damage), viscous work, hourglass (the
+        particles' penalty, the work absorbed on this rank by the paper form, the penalty
+        released since), contact (each particle's half of its pairs' potential:
+        parsph.contact), contact work and external work."""
+        out = {term.key: [] for term in TERMS}
+        for b in sim.bodies:
+            lo, hi = b.lo, b.hi
+            acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
+            out["strain"].append([b.formulation.integrated(sim, b, lambda A: A["psi"])])
+            out["plastic"].append([] if not b.law.plastic else [b.formulation.integrated(
+                sim, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work])])
+            out["damage"].append([] if b.failure_strain is None else [sim.volume[lo:hi] * _damage_work(sim, b)])
+            out["viscous"].append([acc["viscous_work"]])
+            out["hourglass"].append([sim.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
+            out["contact"].append([sim.contact.energy[lo:hi]] if sim.contact else [])
+            out["contact_work"].append([acc["contact_work"]] if sim.contact and sim.contact.dissipative else [])
+            out["external"].append([acc["external_work"]])
+        return out
+
+    def local(self, sim, key: str) -> float:
+        """This rank's part of term `key`, all bodies together."""
+        return float(sum((sum(totals(body), Exact(0)) for body in self.items(sim)[key]), Exact(0)))
+
+
+def _damage_work(sim, b) -> np.ndarray:
+    """W - psi - w_p at `b`'s owned particles: the work they have taken (materials.damage)
+    beyond their strain energy and, with a plastic law, their plastic work (counted as such)."""
+    lo, hi = b.lo, b.hi
+    out = sim.damage_state(b)[1][lo:hi, damage.WORK] - sim.psi[lo:hi]
+    if b.law.plastic:
+        out = out - sim.material_state(b)[1][lo:hi, b.law.plastic.work]
+    return out
