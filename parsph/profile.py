@@ -187,7 +187,7 @@ class Recorder:
     def __init__(self, sim):
         self.calls: list[Call] = []
         self.labels = {stage.run.__code__: stage.name for body in sim.bodies for stage in body.stages}
-        self.labels[type(sim)._stability.__code__] = "stable step"
+        self.labels[type(sim.stable).limit.__code__] = "stable step"
         self.labels[type(sim)._move_reference.__code__] = "reference update"
         self.labels[type(sim).step.__code__] = "integration"
         self.patched: list = []

@@ -40,6 +40,7 @@ from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import allsum
 from parsph.formulations import FORMULATIONS, reference, tlsph
 from parsph.ledger import Ledger
+from parsph.stability import StableStep, check_hourglass_stiffness
 from parsph.materials import damage, update
 from parsph.neighbors import crossing, find_pairs, pair_keys
 from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
@@ -53,15 +54,6 @@ from parsph.walls import Walls
 
 BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
 UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
-
-
-def _breakdown(J: float) -> str:
-    """What went wrong at a point whose stress evaluation failed, from its volume ratio J."""
-    if J <= 0.0:
-        return f"is inverted (J = {J:.4g})"
-    if not math.isfinite(J):
-        return f"has a deformation that is not finite (J = {J})"
-    return f"has a stress that is not finite (J = {J:.4g})"
 
 
 class Body:
@@ -136,10 +128,11 @@ class Simulation:
         self.updates = 0  # reference updates so far
         self.since_update = 0  # steps since the last one
         self.ledger = Ledger(self.bodies)
+        self.stable = StableStep(scene["time"])
         self.walls = Walls(scene["walls"], scene["tools"], dim)
         self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
         self._adopt(local)
-        self._check_hourglass_stiffness()
+        check_hourglass_stiffness(self)
         n = self.n_owned
         if restart is None:
             with collective(comm):
@@ -156,17 +149,9 @@ class Simulation:
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"])
-        self._cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up, for messages
-        self._floor = 0.0  # the smallest stable step allowed (time.step_floor), set below
         self.compute_forces()
         self.ledger.external = self.external_force()  # at the current state, for the work integral
-        if scene["time"]["dt"] > 0:
-            self._cfl_at = (scene["time"]["cfl"] * self._stability()[0], self.step_count)
-        self._stable_dt = restart["clock"]["dt"] if restart else self.stable_time_step()[0]
-        self._first_stable = restart["clock"].get("first_stable", 0.0) if restart else self._stability()[0]
-        self._floor = scene["time"]["step_floor"] * self._first_stable
-        # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
-        self.bound_hourglass = scene["time"]["dt"] == 0 or (self.updated and self.update_strain > 0)
+        self.stable.start(self, restart["clock"] if restart else None)
 
     def _rigid_bodies(self, restart: dict | None) -> list:
         """The freely moving rigid bodies (parsph.rigid), from the particles' initial
@@ -249,7 +234,6 @@ class Simulation:
         self.f_int = np.zeros((n, dim))
         self.f_hg = np.zeros((n, dim) if self.hourglass else (0, dim))
         self.omega_hg2 = np.zeros(n if self.hourglass else 0)  # written by the forces stage
-        self.bound_hourglass = True  # whether it is: the stable step is due after each force evaluation
         self.scratch33 = np.empty((3, 3))  # of the kernels of the stable step and the read-outs
         variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in self.bodies)
         self.hg_psi = np.zeros(n if variational else 0)
@@ -432,16 +416,6 @@ class Simulation:
             if b.failure_strain is not None:
                 self.broken[b.lo:b.hi] = self.damage_state(b)[0][b.lo:b.hi, damage.DAMAGE] >= 1.0
 
-    def unstable_point(self, points: str, q: int) -> ParsphError:
-        """The error for owned point q of set `points`, inverted or with a stress that is
-        not finite."""
-        A = self.sets[points].arrays
-        where = ", ".join(f"{c:.6g}" for c in A["X"][q])
-        what = points[:-1].replace("_", " ")
-        return ParsphError(
-            f"{what} {int(A['gid'][q])} at reference ({where}) {_breakdown(A['J'][q])} at step "
-            f"{self.step_count + 1}, t = {self.t:.6g}; the run is unstable: {self._advice()}")
-
     def point_set(self, name: str) -> PointSet:
         return self.particles if name == "particles" else self.sets[name]
 
@@ -469,95 +443,6 @@ class Simulation:
         if field.initial is not None:
             return np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
         return np.zeros((keep,) + field.shape(self.dim))
-
-    def _check_hourglass_stiffness(self) -> None:
-        """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
-        frequency squared, overflows (an absurd formulation.hourglass). At set-up."""
-        n, ref = self.n_owned, self.ref
-        if not self.hourglass or not len(ref.idx):
-            return
-        rows = np.repeat(np.arange(n), np.diff(ref.ptr))
-        with np.errstate(over="ignore", invalid="ignore"):
-            k = ref.hgc * (self.youngs[rows] + self.youngs[ref.idx])
-            out = 2.0 * np.bincount(rows, weights=k, minlength=n) / self.mass[:n]
-        with collective(self.comm):
-            bad = np.flatnonzero(~np.isfinite(out))
-            if len(bad):
-                i = bad[np.argmin(self.gid[bad])]
-                alpha = self.bodies[self.body[i]].formulation.alpha
-                raise InputError(f"formulation.hourglass = {alpha:g}: the hourglass stiffness of particle "
-                                 f"{self.gid[i]} over its mass, {out[i]:g} 1/s^2, overflows the range of double "
-                                 "precision ([G] recommends 50)")
-
-    def stable_time_step(self) -> tuple:
-        """(size of the next step, largest incremental log strain): time.dt if fixed, else
-        time.cfl times the stable step; the strain for the adaptive reference update (0
-        unless it is enabled). Collective."""
-        settings = self.scene["time"]
-        adaptive = self.updated and self.update_strain > 0
-        if settings["dt"] > 0:
-            return settings["dt"], self._stability()[1] if adaptive else 0.0
-        step, strain = self._stability()
-        return settings["cfl"] * step, strain
-
-    def _stability(self) -> tuple:
-        """(stable step, largest incremental log strain) over all ranks, from
-        formulations.tlsph.stable_time_step (collective). A step of zero, or below
-        time.step_floor times the first one, raises the error naming the particle with the
-        smallest step on any rank."""
-        dt, strain, smallest = np.inf, 0.0, -1
-        ref = self.ref
-        for b in self.bodies:  # in row order: the first particle with the smallest step
-            if b.rigid:
-                step, worst, first = rigid.stable_step(b, self.omega_c2, self.v, self.contact)
-            else:
-                step, worst, first = tlsph.stable_time_step(
-                    b.lo, b.hi, self.fs if b.moves else self.F, self.F, self.J, ref.min_spacing, ref.stiffening,
-                    b.constants.wave_speed, b.law.law_id, b.constants.values, self.dim, self.broken, self.omega_hg2,
-                    b.formulation.hourglass_form, self.omega_c2, self.scratch33)
-            if b.moves:  # the strain since a reference that moves
-                strain = max(strain, worst)
-            if step < dt or (first >= 0 and not step > 0.0):
-                dt, smallest = step, first
-            if not step > 0.0:
-                break
-        reduced = np.array([-dt, strain])
-        if self.comm.size > 1:
-            self.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
-        if -reduced[0] == math.inf:
-            why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in self.bodies)
-                   else "every particle has failed completely (damage 1) and carries no stress; the run is stopped, "
-                        "as nothing is left to integrate")
-            error = ParsphError(f"no particle sets the stable time step at step {self.step_count}, t = {self.t:.6g} s: "
-                                f"{why}")
-            error.agreed = True  # the same reduction on every rank
-            raise error
-        if not -reduced[0] > self._floor:
-            mine = [] if smallest < 0 else [(dt, int(self.gid[smallest]),
-                                             tuple((self.X[smallest] + self.u[smallest]).tolist()))]
-            _, gid, x = min(c for part in self.comm.allgather(mine) for c in part)
-            where = ", ".join(f"{c:.6g}" for c in x)
-            if not -reduced[0] > 0.0:
-                what, why = "collapsed to zero", "is flattened (a principal stretch near zero)"
-            else:
-                what = (f"fell to {-reduced[0]:.3g} s, below time.step_floor = "
-                        f"{self.scene['time']['step_floor']:g} of the first one ({self._first_stable:.3g} s),")
-                why = "is the most flattened (its smallest principal stretch sets the step)"
-            error = ParsphError(
-                f"the stable time step {what} at step {self.step_count}, t = {self.t:.6g}: "
-                f"particle {gid} at ({where}) {why}; the run is unstable: {self._advice()}")
-            error.agreed = True  # every rank found the same particle and raises this
-            raise error
-        return -reduced[0], reduced[1]
-
-    def _advice(self) -> str:
-        """What to change when the run has become unstable."""
-        dt = self.scene["time"]["dt"]
-        if dt == 0:
-            return "reduce time.cfl, raise formulation.hourglass or refine the particles"
-        cfl = "" if self._cfl_at is None else \
-            " (the CFL step, time.cfl times the stable step, was {:.3g} s at step {})".format(*self._cfl_at)
-        return f"reduce time.dt = {dt:.3g} s{cfl}, raise formulation.hourglass or refine the particles"
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self, move_reference: bool = False) -> None:
@@ -593,7 +478,7 @@ class Simulation:
                 except ArithmeticError as exc:  # compiled code divided by zero: the state broke down
                     raise ParsphError(f"the {stage.name} stage failed ({exc}) at step {self.step_count + 1}, "
                                       f"t = {self.t:.6g}: particles coincide or are inverted; the run is "
-                                      f"unstable: {self._advice()}") from None
+                                      f"unstable: {self.stable.advice()}") from None
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
             k += 1
@@ -606,7 +491,7 @@ class Simulation:
                 self.contact.evaluate(self.X[:n] + self.u[:n], self.v[:n])
             except ArithmeticError:
                 raise ParsphError(f"contact failed at step {self.step_count + 1}, t = {self.t:.6g}: particles of "
-                                  f"two bodies coincide; the run is unstable: {self._advice()}") from None
+                                  f"two bodies coincide; the run is unstable: {self.stable.advice()}") from None
             force += self.contact.force
             seconds["contact"] += clock() - t0
         if self.body_acc is not None:
@@ -615,13 +500,6 @@ class Simulation:
             self.tractions.add(force, self.t)
         self.force = force
         self.acc = force / self.mass[:n, None]
-
-    def unstable_particle(self, i: int) -> ParsphError:
-        """The error for owned particle i, inverted or with a stress that is not finite."""
-        where = ", ".join(f"{c:.6g}" for c in self.X[i] + self.u[i])
-        return ParsphError(
-            f"particle {int(self.gid[i])} at ({where}) {_breakdown(self.J[i])} at step {self.step_count + 1}, "
-            f"t = {self.t:.6g}; the run is unstable: {self._advice()}")
 
     def external_force(self) -> np.ndarray:
         """Body force, tractions and constraint reactions on the owned particles."""
@@ -669,7 +547,7 @@ class Simulation:
         start = time.perf_counter()
         inside = sum(self.stage_seconds.values())
         n = self.n_owned
-        dt = self._stable_dt
+        dt = self.stable.dt
         t_new = self.t + dt
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
@@ -703,13 +581,13 @@ class Simulation:
         due = self.updated and not self.eulerian and self.update_every and self.since_update >= self.update_every
         if not due:
             clock = time.perf_counter()
-            self._stable_dt, strain = self.stable_time_step()
+            self.stable.dt, strain = self.stable.next_step(self)
             self.stage_seconds["stable step"] += time.perf_counter() - clock
             due = self.updated and not self.eulerian and self.update_strain and strain > self.update_strain
         if due:
             self.update_reference()
             clock = time.perf_counter()
-            self._stable_dt = self.stable_time_step()[0]
+            self.stable.dt = self.stable.next_step(self)[0]
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
 
@@ -851,7 +729,7 @@ class Simulation:
     @property
     def dt(self) -> float:
         """The step size the next step will use (unless shortened to end at t_end)."""
-        return self._stable_dt
+        return self.stable.dt
 
     def checkpoint_state(self) -> dict:
         """Everything io.checkpoint stores (collective: totals): per-particle arrays of the
@@ -863,7 +741,7 @@ class Simulation:
             "totals": {**self.ledger.checkpoint(self.comm), "wall_force": self.wall_forces().tolist(),
                        "rigid": [body.state() for body in self.rigid_bodies]},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "step_dt": self.step_dt,
-                      "updates": self.updates, "since_update": self.since_update, "first_stable": self._first_stable},
+                      "updates": self.updates, "since_update": self.since_update, "first_stable": self.stable.first},
         }
 
     # ----------------------------------------------------------------- read-outs
@@ -963,7 +841,7 @@ class Simulation:
         rigid = rigid_parts(self, reduction)
         probes = probe_parts(self.scene["probes"], self, reduction)
         reduction.reduce()
-        out = {"time": self.t, "step": float(self.step_count), "dt": self._stable_dt,
+        out = {"time": self.t, "step": float(self.step_count), "dt": self.stable.dt,
                "reference_updates": float(self.updates)}
         out.update(energies())
         for k, label in enumerate(self.walls.names):

@@ -194,7 +194,7 @@ def test_flattened_particle_stops_the_run_with_a_clear_message():
     sim.F[:] = np.eye(2)
     sim.F[3] = np.diag([1.0, 0.0])  # squashed flat in y: no stable step exists
     with pytest.raises(ParsphError, match="time step collapsed"):
-        sim.stable_time_step()
+        sim.stable.next_step(sim)
 
 
 @pytest.mark.parametrize("dim", [1, 2, 3])

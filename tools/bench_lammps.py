@@ -258,7 +258,7 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     X = sim.X[:n]
     sim.v[:n] = velocity_field(X, v0)
     # the step parsph's own CFL estimate would allow (cfl = 1), for the record
-    stable = float(sim._stability()[0])
+    stable = float(sim.stable.limit(sim)[0])
     for _ in range(warmup):
         sim.step()
     start = time.perf_counter()

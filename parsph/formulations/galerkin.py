@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from parsph import COMPILED_SOURCE
+from parsph import COMPILED_SOURCE, stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations.base import CompiledOnce, Stage
@@ -300,14 +300,15 @@ class GalerkinFormulation:
         runs = []
         for coupling in self.couplings:
             if coupling.points == "particles":
-                arrays, (lo, hi), fail = dict(fs=sim.fs if self.updated else sim.F, F=sim.F,
-                                              Fr=sim.Fr if self.updated else sim.F, VP=sim.VP,
-                                              J=sim.J, psi=sim.psi), (body.lo, body.hi), sim.unstable_particle
+                arrays = dict(fs=sim.fs if self.updated else sim.F, F=sim.F, Fr=sim.Fr if self.updated else sim.F,
+                              VP=sim.VP, J=sim.J, psi=sim.psi)
+                lo, hi = body.lo, body.hi
+                fail = (lambda i: stability.unstable_particle(sim, i))
             else:
                 A = sim.sets[coupling.points].arrays
                 arrays = A if self.updated else dict(A, fs=A["F"], Fr=A["F"])  # total-Lagrangian: F^r = I
                 lo, hi = body.set_rows[coupling.points]
-                fail = (lambda q, name=coupling.points: sim.unstable_point(name, q))
+                fail = (lambda q, name=coupling.points: stability.unstable_point(sim, name, q))
             runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points),
                          coupling.points))
 

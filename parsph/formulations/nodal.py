@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from parsph import stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations import tlsph
@@ -172,7 +173,7 @@ class NodalFormulation:
                 sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
                 fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch, sim.step_dt)
             if bad >= 0:
-                raise sim.unstable_particle(bad)
+                raise stability.unstable_particle(sim, bad)
         states = tuple(name for name in (body.law.state, "damage" if body.failure_strain is not None else None)
                        if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
@@ -193,7 +194,7 @@ class NodalFormulation:
             ref = sim.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, fs, sim.VP, sim.B, sim.youngs,
-                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.bound_hourglass, sim.omega_hg2,
+                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.stable.bound_hourglass, sim.omega_hg2,
                         *force_scratch, sim.v, sim.material_state(body)[1] if viscous else sim.no_state,
                         sim.support, kind, constants)
         reads = ("VP",) + (("fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \

@@ -1,0 +1,160 @@
+"""The step size and the run's instabilities: the stable time step of all bodies
+(formulations.tlsph.stable_time_step, rigid.stable_step) with time.cfl or a fixed
+time.dt, its floor, and the errors that name the particle or point where a run broke down
+with what to change.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from mpi4py import MPI
+
+from parsph import rigid
+from parsph.errors import InputError, ParsphError
+from parsph.formulations import tlsph
+from parsph.parallel.runtime import collective
+
+
+class StableStep:
+    """The size of the next step and what bounds it: the first stable step (for
+    time.step_floor), with a fixed time.dt the CFL step at set-up (for messages), and
+    whether the hourglass frequencies must be formed at each force evaluation."""
+
+    def __init__(self, settings: dict):
+        self.settings = settings  # the scene's [time]
+        self.dt = 0.0
+        self.first = 0.0  # the first stable step
+        self.floor = 0.0  # the smallest stable step allowed (time.step_floor), set by start
+        self.cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up
+        self.bound_hourglass = True  # whether the stable step is due after each force evaluation
+
+    def start(self, sim, clock: dict | None) -> None:
+        """The first step's size, or the checkpoint's `clock` (collective)."""
+        settings = self.settings
+        if settings["dt"] > 0:
+            self.cfl_at = (settings["cfl"] * self.limit(sim)[0], sim.step_count)
+        self.dt = clock["dt"] if clock else self.next_step(sim)[0]
+        self.first = clock.get("first_stable", 0.0) if clock else self.limit(sim)[0]
+        self.floor = settings["step_floor"] * self.first
+        # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
+        self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.update_strain > 0)
+
+    def next_step(self, sim) -> tuple:
+        """(size of the next step, largest incremental log strain): time.dt if fixed, else
+        time.cfl times the stable step; the strain for the adaptive reference update (0
+        unless it is enabled). Collective."""
+        settings = self.settings
+        adaptive = sim.updated and sim.update_strain > 0
+        if settings["dt"] > 0:
+            return settings["dt"], self.limit(sim)[1] if adaptive else 0.0
+        step, strain = self.limit(sim)
+        return settings["cfl"] * step, strain
+
+    def limit(self, sim) -> tuple:
+        """(stable step, largest incremental log strain) over all ranks, from
+        formulations.tlsph.stable_time_step (collective). A step of zero, or below
+        time.step_floor times the first one, raises the error naming the particle with the
+        smallest step on any rank."""
+        dt, strain, smallest = np.inf, 0.0, -1
+        ref = sim.ref
+        for b in sim.bodies:  # in row order: the first particle with the smallest step
+            if b.rigid:
+                step, worst, first = rigid.stable_step(b, sim.omega_c2, sim.v, sim.contact)
+            else:
+                step, worst, first = tlsph.stable_time_step(
+                    b.lo, b.hi, sim.fs if b.moves else sim.F, sim.F, sim.J, ref.min_spacing, ref.stiffening,
+                    b.constants.wave_speed, b.law.law_id, b.constants.values, sim.dim, sim.broken, sim.omega_hg2,
+                    b.formulation.hourglass_form, sim.omega_c2, sim.scratch33)
+            if b.moves:  # the strain since a reference that moves
+                strain = max(strain, worst)
+            if step < dt or (first >= 0 and not step > 0.0):
+                dt, smallest = step, first
+            if not step > 0.0:
+                break
+        reduced = np.array([-dt, strain])
+        if sim.comm.size > 1:
+            sim.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
+        if -reduced[0] == math.inf:
+            why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in sim.bodies)
+                   else "every particle has failed completely (damage 1) and carries no stress; the run is stopped, "
+                        "as nothing is left to integrate")
+            error = ParsphError(f"no particle sets the stable time step at step {sim.step_count}, t = {sim.t:.6g} s: "
+                                f"{why}")
+            error.agreed = True  # the same reduction on every rank
+            raise error
+        if not -reduced[0] > self.floor:
+            mine = [] if smallest < 0 else [(dt, int(sim.gid[smallest]),
+                                             tuple((sim.X[smallest] + sim.u[smallest]).tolist()))]
+            _, gid, x = min(c for part in sim.comm.allgather(mine) for c in part)
+            where = ", ".join(f"{c:.6g}" for c in x)
+            if not -reduced[0] > 0.0:
+                what, why = "collapsed to zero", "is flattened (a principal stretch near zero)"
+            else:
+                what = (f"fell to {-reduced[0]:.3g} s, below time.step_floor = "
+                        f"{self.settings['step_floor']:g} of the first one ({self.first:.3g} s),")
+                why = "is the most flattened (its smallest principal stretch sets the step)"
+            error = ParsphError(
+                f"the stable time step {what} at step {sim.step_count}, t = {sim.t:.6g}: "
+                f"particle {gid} at ({where}) {why}; the run is unstable: {self.advice()}")
+            error.agreed = True  # every rank found the same particle and raises this
+            raise error
+        return -reduced[0], reduced[1]
+
+    def advice(self) -> str:
+        """What to change when the run has become unstable."""
+        dt = self.settings["dt"]
+        if dt == 0:
+            return "reduce time.cfl, raise formulation.hourglass or refine the particles"
+        cfl = "" if self.cfl_at is None else \
+            " (the CFL step, time.cfl times the stable step, was {:.3g} s at step {})".format(*self.cfl_at)
+        return f"reduce time.dt = {dt:.3g} s{cfl}, raise formulation.hourglass or refine the particles"
+
+
+def breakdown(J: float) -> str:
+    """What went wrong at a point whose stress evaluation failed, from its volume ratio J."""
+    if J <= 0.0:
+        return f"is inverted (J = {J:.4g})"
+    if not math.isfinite(J):
+        return f"has a deformation that is not finite (J = {J})"
+    return f"has a stress that is not finite (J = {J:.4g})"
+
+
+def unstable_particle(sim, i: int) -> ParsphError:
+    """The error for owned particle i, inverted or with a stress that is not finite."""
+    where = ", ".join(f"{c:.6g}" for c in sim.X[i] + sim.u[i])
+    return ParsphError(
+        f"particle {int(sim.gid[i])} at ({where}) {breakdown(sim.J[i])} at step {sim.step_count + 1}, "
+        f"t = {sim.t:.6g}; the run is unstable: {sim.stable.advice()}")
+
+
+def unstable_point(sim, points: str, q: int) -> ParsphError:
+    """The error for owned point q of set `points`, inverted or with a stress that is
+    not finite."""
+    A = sim.sets[points].arrays
+    where = ", ".join(f"{c:.6g}" for c in A["X"][q])
+    what = points[:-1].replace("_", " ")
+    return ParsphError(
+        f"{what} {int(A['gid'][q])} at reference ({where}) {breakdown(A['J'][q])} at step "
+        f"{sim.step_count + 1}, t = {sim.t:.6g}; the run is unstable: {sim.stable.advice()}")
+
+
+def check_hourglass_stiffness(sim) -> None:
+    """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
+    frequency squared, overflows (an absurd formulation.hourglass). At set-up."""
+    n, ref = sim.n_owned, sim.ref
+    if not sim.hourglass or not len(ref.idx):
+        return
+    rows = np.repeat(np.arange(n), np.diff(ref.ptr))
+    with np.errstate(over="ignore", invalid="ignore"):
+        k = ref.hgc * (sim.youngs[rows] + sim.youngs[ref.idx])
+        out = 2.0 * np.bincount(rows, weights=k, minlength=n) / sim.mass[:n]
+    with collective(sim.comm):
+        bad = np.flatnonzero(~np.isfinite(out))
+        if len(bad):
+            i = bad[np.argmin(sim.gid[bad])]
+            alpha = sim.bodies[sim.body[i]].formulation.alpha
+            raise InputError(f"formulation.hourglass = {alpha:g}: the hourglass stiffness of particle "
+                             f"{sim.gid[i]} over its mass, {out[i]:g} 1/s^2, overflows the range of double "
+                             "precision ([G] recommends 50)")
