@@ -143,11 +143,14 @@ class Contact:
                    self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2, self.entry_force,
                    self.closest)
 
-    def exclude(self, keys: np.ndarray) -> None:
-        """The kernel's pairs (their pair_keys, sorted) that self-contact leaves out, after the
-        reference's pairs changed: the lists are searched again at the next evaluation."""
-        self.kernel_pairs = keys
-        self.rule.forget()
+    def exclude(self, pairs, gid: np.ndarray) -> None:
+        """The kernel's pairs (a relation of the owned rows; gid: the local rows' global ids),
+        which self-contact leaves out, after the reference's pairs changed: the lists are
+        searched again at the next evaluation."""
+        if self.self_contact:
+            rows = np.repeat(np.arange(len(pairs.ptr) - 1), np.diff(pairs.ptr))
+            self.kernel_pairs = np.unique(pair_keys(gid[rows], gid[pairs.idx]))
+            self.rule.forget()
 
     def search(self, x: np.ndarray) -> None:
         """Contact ghosts (the other ranks' contact particles within the largest contact

@@ -47,3 +47,10 @@ class PointSet:
     def refresh(self, *names: str) -> None:
         """Copy the owners' values of the named arrays into the ghost (and mirror) rows."""
         self.decomp.refresh(*(self.arrays[name] for name in names))
+
+    def commit(self) -> None:
+        """The material state of the last stress evaluation (the fields NAME_trial) becomes
+        the committed state of the owned points."""
+        for name in self.carried:
+            if fields.get(name, self.name).kind == "state":
+                self.owned(name)[:] = self.owned(name + "_trial")

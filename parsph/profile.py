@@ -188,7 +188,7 @@ class Recorder:
         self.calls: list[Call] = []
         self.labels = {stage.run.__code__: stage.name for body in sim.bodies for stage in body.stages}
         self.labels[type(sim.stable).limit.__code__] = "stable step"
-        self.labels[type(sim)._move_reference.__code__] = "reference update"
+        self.labels[type(sim.topology).move.__code__] = "reference update"
         self.labels[type(sim).step.__code__] = "integration"
         self.patched: list = []
 

@@ -24,30 +24,29 @@ that the history, like the particle state, is the same bit for bit on any number
 from __future__ import annotations
 
 import collections
-import contextlib
 import math
 import time
 
 import numpy as np
-from mpi4py import MPI
 
 from parsph import config, fields, materials, quantities
 from parsph.bc import BoundaryConditions, Tractions, apply_initial_conditions
 from parsph.collocation import BoundaryCollocation, collocated
 from parsph.contact import Contact
 from parsph.diagnostics import RowReduction, contact_parts, global_parts, probe_parts, rigid_parts
-from parsph.errors import InputError, ParsphError
+from parsph.errors import ParsphError
 from parsph.exact_sum import allsum
 from parsph.formulations import FORMULATIONS, reference, tlsph
+from parsph.failure import Failure
 from parsph.ledger import Ledger
 from parsph.stability import StableStep, check_hourglass_stiffness
+from parsph.topology import Topology, reference_shift
 from parsph.materials import damage, update
-from parsph.neighbors import crossing, find_pairs, pair_keys
-from parsph.parallel.decomposition import Decomposition, LocalBody, add_ghosts, localize, partition
+from parsph.neighbors import find_pairs
+from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
 from parsph.points import PointSet
-from parsph.relations import Skin
 from parsph import rigid
 from parsph.rigid import RigidBody
 from parsph.walls import Walls
@@ -95,20 +94,11 @@ class Simulation:
         moving = [b.formulation for b in self.bodies if b.moves]  # their reference moves, together (config)
         self.updated = bool(moving)
         self.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
-        self.breaking = any(b.breaks_pairs for b in self.bodies)
+        self.failure = Failure(self.bodies, dim, comm)
         self.eta = max(f.eta for f in forms)  # the bodies with Hessian stabilisation share it (config)
         self.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
         self.hourglass = any(f.hourglass_form for f in forms)
-        schedule = (moving or forms)[0]  # the moving bodies share it (config)
-        self.update_every, self.update_strain = schedule.update_every, schedule.update_strain
-        # the neighbour lists and ghost layers of an updated reference: searched at most every
-        # search_every updates, kept while no particle has moved half the skin since
-        supports = local.fields["support"][: local.n_owned]
-        kept = config.moving_formulation(scene) or specs[0]["formulation"]
-        self.search_rule = Skin(config.skin(kept) * comm.allreduce(
-            float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
-            config.search_every(kept, bool(scene["symmetry"])))
-        self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
+        self.topology = Topology(scene, self.bodies, local, comm)
         # the formulations, laws and their states, the updated reference and damage the bodies use
         self.owners = {f.type for f in forms} | {b.law.name for b in self.bodies} | {b.law.state for b in self.bodies}
         if self.updated:
@@ -125,8 +115,6 @@ class Simulation:
         self.t = restart["clock"]["t"] if restart else 0.0  # the constraints in force depend on it
         self.step_count = 0
         self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
-        self.updates = 0  # reference updates so far
-        self.since_update = 0  # steps since the last one
         self.ledger = Ledger(self.bodies)
         self.stable = StableStep(scene["time"])
         self.walls = Walls(scene["walls"], scene["tools"], dim)
@@ -145,7 +133,7 @@ class Simulation:
             clock, carried = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
             self.step_dt = clock.get("step_dt", 0.0)
-            self.updates, self.since_update = clock.get("updates", 0), clock.get("since_update", 0)
+            self.topology.restore(clock)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"])
@@ -181,17 +169,17 @@ class Simulation:
             local, mirrors = add_images(local, ref[0], self.scene["symmetry"], self.comm)
             fl, n, dim = local.fields, local.n_owned, self.dim
             # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
-            layer2 = self.search_rule.every > 1 or self.breaking
+            layer2 = self.topology.rule.every > 1 or self.failure.breaking
             self.decomp = Decomposition(local, self.comm, mirrors, layer2=layer2)
             body = np.searchsorted(self.offsets, local.gid % local.total, side="right") - 1
-            self.detached = self._failed(fl.get("damage"), body)
-            failed = self.detached is not None and self.detached[:n].any()
+            self.failure.detached = self.failure.failed(fl.get("damage"), body)
+            failed = self.failure.detached is not None and self.failure.detached[:n].any()
             searched = find_pairs(fl["X"], fl["support"], local.gid, n) if failed else None
-            cut = self._crack(searched, fl["X"], fl["measure"], local.gid, n, self.detached)
+            cut = self.failure.crack(searched, fl["X"], fl["measure"], local.gid, n, self.failure.detached)
             self.ref = reference.build(
                 fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, self.decomp.n_rows,
                 self.scene["kernel"]["type"], body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.weighted_hessian, skin=self.skin if self.updated else None, detached=self.detached,
+                self.eta, self.weighted_hessian, skin=self.topology.skin if self.updated else None, detached=self.failure.detached,
                 cut=cut)
         if layer2:
             keep = len(local.gid)
@@ -221,7 +209,7 @@ class Simulation:
             self.Fr = np.ascontiguousarray(fl["Fr"][:keep] if "Fr" in fl else eye)
             self.measure_r = fl["measure_r"][:keep] if "measure_r" in fl else self.measure.copy()
             self.volume_r = fl["volume_r"][:keep] if "volume_r" in fl else self.volume.copy()
-            self.shift = self._reference_shift()
+            self.shift = reference_shift(self)
             self.d = np.zeros((keep, dim))
             self.fs = np.zeros((keep, dim, dim))
         self.f = np.zeros((keep, dim, dim) if self.eta > 0 else (0, dim, dim))
@@ -246,7 +234,7 @@ class Simulation:
         if self.updated:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, self.decomp, self.carried, arrays)
-        self._find_broken()
+        self.failure.find_broken(self)
         self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
         with collective(self.comm):  # the formulations' own relations
             for b in self.bodies:
@@ -263,96 +251,11 @@ class Simulation:
         self.contact = Contact(self.scene["contact"], self.bodies, self.body, self.measure, self.mass, self.gid, n, dim,
                                config.thickness(self.scene), self.comm) if self.scene.get("contact") else None
         self.omega_c2 = self.contact.omega2 if self.contact else np.zeros(0)
-        self._exclude_kernel_pairs()
+        self.exclude_kernel_pairs()
         for b in self.bodies:
             b.stages = [] if b.rigid else b.formulation.stages(self, b)
             if b.rigid:
                 self.F[b.lo:b.hi] = np.eye(dim)
-
-    def _reference_shift(self) -> np.ndarray:
-        """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
-        X^r = X + u (as it is after every move of its reference), so that d is exactly zero
-        in the new reference, whether the lists were searched or kept: its forces use the
-        stress of the last reference (formulations.tlsph.stress_at)."""
-        if self.eulerian:
-            return np.where((self.X + self.u == self.Xr) & self.moves[:, None], self.u, self.Xr - self.X)
-        return self.Xr - self.X
-
-    def _failed(self, state: np.ndarray | None, body: np.ndarray) -> np.ndarray | None:
-        """Which local particles of bodies whose failed particles lose their pairs have
-        failed (damage 1 in the damage `state` of every local row; none without one), or
-        None if no body's do."""
-        if not self.breaking:
-            return None
-        if state is None:
-            return np.zeros(len(body), bool)
-        breaking = np.array([b.breaks_pairs for b in self.bodies])
-        return breaking[body[: len(state)]] & (state[:, damage.DAMAGE] >= 1.0)
-
-    def _crack(self, searched, X: np.ndarray, measure: np.ndarray, gid: np.ndarray, n: int,
-               detached) -> np.ndarray | None:
-        """The keys of the pairs the failed particles cut (neighbors.crossing), over all ranks:
-        each owned failed particle's from its neighbours in the reference X (`searched`:
-        neighbors.find_pairs of the owned rows, needed where one has failed) (collective)."""
-        if detached is None:
-            return None
-        failed = np.flatnonzero(detached[:n])
-        keys = np.zeros(0, np.int64)
-        if len(failed):
-            keys = crossing(searched, X, gid, measure ** (1.0 / self.dim), failed)
-        return np.unique(np.concatenate(self.comm.allgather(keys)))
-
-    def _break_pairs(self) -> None:
-        """Particles that have failed since the last call lose their pairs (collective): the
-        reference data is built again without them (materials.damage: cracks open), and
-        again while it leaves a particle with a singular correction matrix (a particle cut
-        off from its body: it fails too). The forces are evaluated on the new pairs; the
-        change of F this makes does no work (the particles do not move): an elasto-plastic
-        particle keeps its elastic state (its plastic metric takes the change), an elastic
-        one's stress changes, and the damage state's work W is kept, so that the strain
-        energy it releases counts as damage work, and the hourglass penalty it drops as
-        released (the balance stays closed)."""
-        n = self.n_owned
-        state, trial = self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
-        new = self._failed(state[:n], self.body) & ~self.detached[:n]
-        if not self.comm.allreduce(bool(new.any()), op=MPI.LOR):
-            return
-        searched = find_pairs(self.X, self.support, self.gid, n)  # in the reference: once for every round
-        while True:
-            self.decomp.refresh_all(state)
-            detached = self._failed(state, self.body)
-            with collective(self.comm):
-                cut = self._crack(searched, self.X, self.measure, self.gid, n, detached)
-                ref = reference.build(
-                    self.X, self.measure, self.volume, self.support, self.gid, n, self.decomp.n_rows,
-                    self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
-                    self.eta, self.weighted_hessian, detached=detached, cut=cut,
-                    tolerant=True)
-            if not self.comm.allreduce(len(ref.bad)):
-                break
-            state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
-        self.ref, self.detached = ref, detached  # the stages read sim.ref when they run
-        self._exclude_kernel_pairs()
-        penalty = self.hg_psi.copy()
-        work = state[:, damage.WORK].copy()
-        F_old = self.F[:n].copy()
-        self.compute_forces()
-        plastic = [b for b in self.bodies if b.law.plastic and not b.rigid]
-        for b in plastic:  # their elastic state (stress) is kept: the plastic metric takes the change of F
-            b.law.plastic.keep_elastic(self.material_state(b)[0][b.lo:b.hi], F_old[b.lo:b.hi], self.F[b.lo:b.hi])
-        if plastic:
-            self.compute_forces()
-        self.ledger.add("hourglass_released", penalty[:n] - self.hg_psi[:n])
-        trial[:, damage.WORK] = work
-        self._commit_states()
-        self._find_broken()
-        self.ledger.external = self.external_force()
-
-    def _exclude_kernel_pairs(self) -> None:
-        """Tell a self-contact the kernel's pairs (of the owned rows), which it leaves out."""
-        if self.contact and self.contact.self_contact:
-            rows = np.repeat(np.arange(self.n_owned), np.diff(self.ref.ptr))
-            self.contact.exclude(np.unique(pair_keys(self.gid[rows], self.gid[self.ref.idx])))
 
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned
@@ -393,28 +296,10 @@ class Simulation:
             return self.no_state, self.no_state
         return self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
 
-    def _commit(self, dt: float) -> None:
-        """The state of the last stress evaluation becomes the committed state (owned
-        points); damage grows over the coming step dt (materials.damage.grow)."""
-        self._commit_states()
-        for b in self.bodies:
-            if b.failure_strain is not None:
-                damage.grow(self.damage_state(b)[0][b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
-                            self.support[b.lo:b.hi], dt)
-        self._find_broken()
-
-    def _commit_states(self) -> None:
-        """The state of the last stress evaluation becomes the committed state (owned points)."""
-        for points in self.point_sets():
-            for name in points.carried:
-                if fields.get(name, points.name).kind == "state":
-                    points.owned(name)[:] = points.owned(name + "_trial")
-
-    def _find_broken(self) -> None:
-        """Mark the owned particles that have failed (committed damage 1)."""
-        for b in self.bodies:
-            if b.failure_strain is not None:
-                self.broken[b.lo:b.hi] = self.damage_state(b)[0][b.lo:b.hi, damage.DAMAGE] >= 1.0
+    def exclude_kernel_pairs(self) -> None:
+        """Tell a self-contact the kernel's pairs, which it leaves out (parsph.contact)."""
+        if self.contact:
+            self.contact.exclude(self.ref, self.gid)
 
     def point_set(self, name: str) -> PointSet:
         return self.particles if name == "particles" else self.sets[name]
@@ -461,7 +346,7 @@ class Simulation:
             phase = [b.stages[k] for b in self.bodies if k < len(b.stages)]
             if move_reference and any(stage.force_row for stage in phase):
                 move_reference = False
-                if self._move_reference():  # searched: new arrays, the whole evaluation in the new reference
+                if self.topology.move(self):  # searched: new arrays, the whole evaluation in the new reference
                     self.compute_forces()
                     return
                 continue  # the same phase, with the stages of the new reference
@@ -551,9 +436,11 @@ class Simulation:
         t_new = self.t + dt
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
-        self._commit(dt)
-        if self.breaking:
-            self._break_pairs()
+        for points in self.point_sets():  # the last evaluation's state is committed
+            points.commit()
+        self.failure.grow(self, dt)
+        if self.failure.breaking:
+            self.failure.break_pairs(self)
         if self.contact is not None and self.contact.dissipative:  # friction's limit
             self.contact.dt = dt
         self.ledger.begin(self)
@@ -574,157 +461,22 @@ class Simulation:
         self._prescribe_velocity(self.t)
         self.ledger.end(self, dt)
         self.step_count += 1
-        self.since_update += 1
+        self.topology.since += 1
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))
         # an update that is due by count makes this configuration's stable step moot
-        due = self.updated and not self.eulerian and self.update_every and self.since_update >= self.update_every
+        due = self.topology.due(self)
         if not due:
             clock = time.perf_counter()
             self.stable.dt, strain = self.stable.next_step(self)
             self.stage_seconds["stable step"] += time.perf_counter() - clock
-            due = self.updated and not self.eulerian and self.update_strain and strain > self.update_strain
+            due = self.topology.due(self, strain)
         if due:
-            self.update_reference()
+            self.topology.update(self)
             clock = time.perf_counter()
             self.stable.dt = self.stable.next_step(self)[0]
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
-
-    def update_reference(self) -> None:
-        """Make the current configuration the reference [V §3.1] between steps
-        (_move_reference) and evaluate the forces in it."""
-        self._move_reference()
-        self.compute_forces()
-        self.ledger.external = self.external_force()
-
-    def _move_reference(self) -> bool:
-        """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
-        V^r = J V^0 (Remark 1); re-decide ownership (parallel RCB of X^r) if the work is
-        out of balance, migrate the particles with their state, find ghosts and neighbours
-        in X^r and rebuild the corrections. An Eulerian kernel (a move inside every step)
-        searches at most every search_every steps, with lists and ghost layers a skin wider,
-        and in between rebuilds the reference on the kept lists (_recommit): the same result
-        as a search every step. Returns whether it searched (the arrays are new)."""
-        start = time.perf_counter()
-        for b in self.bodies:  # the penalty restarts at 0
-            if b.moves:
-                self.ledger.totals["hourglass_released"][b.index].add(self.hg_psi[b.lo:b.hi])
-        n = self.n_owned
-        moved = {name: self._moved(name) for name in self.sets}  # stress points at the current configuration
-        x = self.X[:n] + self.u[:n] if self.all_move else \
-            np.where(self.moves[:n, None], self.X[:n] + self.u[:n], self.Xr[:n])  # the new reference
-        searching = self.search_rule.every == 1 or self.search_rule.due(np.concatenate([x, *moved.values()]))
-        if searching:
-            self._search(moved)
-        else:
-            self._recommit(moved)
-        self.search_rule.stepped()
-        self.stage_seconds["reference update"] += time.perf_counter() - start
-        self.updates += 1
-        self.since_update = 0
-        return searching
-
-    def _search(self, moved: dict) -> None:
-        """The reference update with a new decomposition: ownership, ghosts, neighbours
-        (`moved`: the owned points of the other sets at their new reference, _moved)."""
-        n = self.n_owned
-        owned = dict(self.particles.migrating(), **self._new_reference())
-        # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
-        sets = {name: dict(points.migrating(), Xr=moved[name], Fr=points.owned("F").copy())
-                for name, points in self.sets.items()}
-        if self.comm.size > 1 and not sets:
-            work = np.array(self.comm.allgather(len(self.ref.idx) + n), float)
-            if work.max() > (1.0 + self.rebalance) * work.mean():
-                owned = partition(owned, "Xr", self.comm)
-        self.skin = self.search_rule.length if self.search_rule.every > 1 else 0.0
-        with collective(self.comm):
-            local = localize(owned, sets, "Xr", self.comm, self.skin) if sets else \
-                add_ghosts(owned, "Xr", self.comm, skin=self.skin)
-        with self._update_failure():
-            self._adopt(local)
-        self.search_rule.searched(np.concatenate([self.Xr[: self.n_owned],
-                                                  *(points.owned("Xr") for points in self.sets.values())]))
-
-    def _recommit(self, moved: dict) -> None:
-        """The reference update between searches (Eulerian kernel): X^r = x, F^r = F,
-        V^r = J V^0 on the owned particles (and their moved stress points), every carried
-        field refreshed on both ghost layers, then the reference data and the Galerkin
-        relations rebuilt on the kept neighbour lists: the same as _search gives, without
-        repartitioning or finding neighbours. F, the stress and VP (formed for the current
-        configuration) stand; the motion from the new reference is the identity."""
-        n = self.n_owned
-        eye = np.eye(self.dim)
-        for name, points in self.sets.items():
-            A = points.arrays
-            A["Xr"][: points.n_owned] = moved[name]
-            A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
-            A["fs"][:] = eye
-            points.refresh("Xr", "Fr")
-        for name, value in self._new_reference().items():
-            getattr(self, name)[:n] = value
-        self.decomp.refresh_all(*(self.particles.arrays[name] for name in fields.migrating(self.carried)
-                                  if name != "gid"))
-        if self.eulerian and self.all_move:
-            self.shift[:] = self.u  # d = 0 exactly (_reference_shift)
-        else:
-            np.subtract(self.Xr, self.X, out=self.shift)
-            if self.eulerian:
-                np.copyto(self.shift, self.u, where=self.moves[:, None])
-        if self.all_move:
-            self.d[:] = 0.0
-        else:  # the bodies that keep their initial reference: d = u
-            np.subtract(self.u, self.shift, out=self.d)
-            self.d[self.moves] = 0.0
-        self.fs[:] = eye
-        self.hg_psi[self.moves[: len(self.hg_psi)]] = 0.0
-        with self._update_failure(), collective(self.comm):
-            self.ref = reference.build(
-                self.Xr, self.measure_r, self.volume_r, self.support, self.gid, n, self.decomp.n_rows,
-                self.scene["kernel"]["type"], self.body, [b.formulation.pair_options for b in self.bodies],
-                self.eta, self.weighted_hessian, kept=self.ref.kept)
-            self._exclude_kernel_pairs()
-            for b in self.bodies:
-                b.formulation.build(self, b, self.scene["kernel"]["type"], search=False)
-        if self.collocation:
-            self.collocation = BoundaryCollocation(self)
-        for b in self.bodies:
-            b.stages = b.formulation.stages(self, b)
-
-    def _new_reference(self) -> dict:
-        """The owned particles' new updated reference: X^r = x, F^r = F, V^r = J V^0 (Remark 1)
-        where it moves; the bodies that keep their initial reference keep it."""
-        n = self.n_owned
-        new = dict(Xr=self.X[:n] + self.u[:n], Fr=self.F[:n].copy(), measure_r=self.J[:n] * self.measure[:n],
-                   volume_r=self.J[:n] * self.volume[:n])
-        if not self.all_move:
-            still = ~self.moves[:n]
-            for name, value in new.items():
-                value[still] = getattr(self, name)[:n][still]
-        return new
-
-    def _moved(self, name: str) -> np.ndarray:
-        """The owned points of set `name` at their new updated reference, each body's moved
-        with its particles (formulations.galerkin.GalerkinFormulation.moved)."""
-        Xr = self.sets[name].owned("Xr").copy()
-        for b in self.bodies:
-            lo, hi = b.set_rows[name]
-            if hi > lo and b.moves:
-                Xr[lo:hi] = b.formulation.moved(self, b)
-        return Xr
-
-    @contextlib.contextmanager
-    def _update_failure(self):
-        """A reference update that fails on the configuration (not the input) says so."""
-        try:
-            yield
-        except InputError as exc:
-            error = ParsphError(
-                f"reference update {self.updates + 1} at step {self.step_count}, t = {self.t:.6g} failed: "
-                f"{str(exc).rstrip('.')}. The particles are too disordered for a new reference: update "
-                "earlier (formulation.update_strain), raise the stabilisation or refine the particles")
-            error.agreed = getattr(exc, "agreed", False)
-            raise error from None
 
     @property
     def dt(self) -> float:
@@ -741,7 +493,7 @@ class Simulation:
             "totals": {**self.ledger.checkpoint(self.comm), "wall_force": self.wall_forces().tolist(),
                        "rigid": [body.state() for body in self.rigid_bodies]},
             "clock": {"t": self.t, "step": self.step_count, "dt": self.dt, "step_dt": self.step_dt,
-                      "updates": self.updates, "since_update": self.since_update, "first_stable": self.stable.first},
+                      "updates": self.topology.count, "since_update": self.topology.since, "first_stable": self.stable.first},
         }
 
     # ----------------------------------------------------------------- read-outs
@@ -842,7 +594,7 @@ class Simulation:
         probes = probe_parts(self.scene["probes"], self, reduction)
         reduction.reduce()
         out = {"time": self.t, "step": float(self.step_count), "dt": self.stable.dt,
-               "reference_updates": float(self.updates)}
+               "reference_updates": float(self.topology.count)}
         out.update(energies())
         for k, label in enumerate(self.walls.names):
             for a, name in enumerate("xyz"[: self.dim]):

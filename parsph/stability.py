@@ -39,14 +39,14 @@ class StableStep:
         self.first = clock.get("first_stable", 0.0) if clock else self.limit(sim)[0]
         self.floor = settings["step_floor"] * self.first
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
-        self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.update_strain > 0)
+        self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.topology.strain > 0)
 
     def next_step(self, sim) -> tuple:
         """(size of the next step, largest incremental log strain): time.dt if fixed, else
         time.cfl times the stable step; the strain for the adaptive reference update (0
         unless it is enabled). Collective."""
         settings = self.settings
-        adaptive = sim.updated and sim.update_strain > 0
+        adaptive = sim.updated and sim.topology.strain > 0
         if settings["dt"] > 0:
             return settings["dt"], self.limit(sim)[1] if adaptive else 0.0
         step, strain = self.limit(sim)

@@ -62,7 +62,7 @@ def main() -> None:
         k = int(np.argmax(np.abs(dJ)))
         w_ul, w_tl = ul.ledger.local(ul, "strain"), tl.ledger.local(tl, "strain")
         where = ", ".join(f"{c:.4g}" for c in ul.X[k])
-        print(f"{ul.t:<11.5g} {ul.updates:<8d} {w_ul:<12.5g} {w_tl:<12.5g} {w_tl / w_ul:<7.4f} "
+        print(f"{ul.t:<11.5g} {ul.topology.count:<8d} {w_ul:<12.5g} {w_tl:<12.5g} {w_tl / w_ul:<7.4f} "
               f"{dJ.mean():+.2e} {np.percentile(dJ, 1):+.2e} {np.percentile(dJ, 99):+.2e} ({where})",
               flush=True)
 

@@ -230,7 +230,7 @@ class GalerkinFormulation:
     def build(self, sim, body, kernel: str, search: bool = True) -> None:
         """The relations and coefficients of `body` in the reference configuration: X (once,
         Lagrangian kernel) or the updated reference X^r (Eulerian kernel, at every step:
-        relations searched with the skin sim.skin and kept, or with `search` False picked
+        relations searched with the skin sim.topology.skin and kept, or with `search` False picked
         from the kept ones); the row data of the ghost integration points is copied from
         their owners."""
         P = sim.particles.arrays
@@ -252,7 +252,7 @@ class GalerkinFormulation:
                 if not self.updated:
                     return find_relation(*args)
                 if search:
-                    self.kept[name, label] = KeptRelation(find_relation(*args, skin=sim.skin), args[6])
+                    self.kept[name, label] = KeptRelation(find_relation(*args, skin=sim.topology.skin), args[6])
                 return self.kept[name, label].current(args[2], args[3], args[5])
             trial = related("trial", name, "particles", Y[: points.n_owned], X, gid, support, "cols",
                             np.where(active, 0, -1)[: points.n_owned], group_cols)
