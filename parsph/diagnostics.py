@@ -21,6 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
+from parsph import readouts
 from parsph.exact_sum import SCALE, Exact, totals
 from parsph.ledger import TERMS
 from parsph.rigid import moments
@@ -127,7 +128,7 @@ def global_parts(state, reduction: RowReduction):
     Returns the function that gives them as "NAME" and "NAME.BODY" once `reduction` is
     reduced."""
     dim = state.dim
-    eta = state.disorder()
+    eta = readouts.disorder(state)
     columns = particle_columns(state.mass, state.v, state.X, state.u, eta)
     energies = state.ledger.items(state)
     bodies = state.bodies
@@ -291,3 +292,26 @@ def check_finite(values: dict, state) -> None:
         "range of double precision (1.8e308)")
     error.agreed = True  # the row is the same global reduction on every rank
     raise error
+
+
+def history_row(sim, reduction: RowReduction | None = None) -> dict:
+    """The history row: clock, diagnostics.global_parts, obstacle forces and probes
+    (collective: one reduction over the ranks, `reduction` if given, holding what the
+    caller added)."""
+    reduction = reduction or RowReduction(sim.comm)
+    energies = global_parts(sim, reduction)
+    walls = reduction.add_sums(sim.walls.contacts)  # obstacle-major, then component
+    contact = contact_parts(sim, reduction)
+    rigid = rigid_parts(sim, reduction)
+    probes = probe_parts(sim.scene["probes"], sim, reduction)
+    reduction.reduce()
+    out = {"time": sim.t, "step": float(sim.step_count), "dt": sim.stable.dt,
+           "reference_updates": float(sim.topology.count)}
+    out.update(energies())
+    for k, label in enumerate(sim.walls.names):
+        for a, name in enumerate("xyz"[: sim.dim]):
+            out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * sim.dim + a])
+    out.update(contact())
+    out.update(rigid())
+    out.update(probes())
+    return out

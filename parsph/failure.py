@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
+from parsph import conditions
 from parsph.formulations import reference
 from parsph.materials import damage
 from parsph.neighbors import crossing, find_pairs
@@ -105,4 +106,4 @@ class Failure:
         for points in sim.point_sets():
             points.commit()
         self.find_broken(sim)
-        sim.ledger.external = sim.external_force()
+        sim.ledger.external = conditions.external_force(sim)

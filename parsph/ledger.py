@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parsph import conditions
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import tlsph
 from parsph.materials import damage
@@ -112,7 +113,7 @@ class Ledger:
             self.add("viscous_work", -0.5 * (start["f_visc"] + sim.f_visc) * du)
         if start["f_cd"] is not None:
             self.add("contact_work", -0.5 * (start["f_cd"] + sim.contact.dissipation) * du)
-        self.external = sim.external_force()
+        self.external = conditions.external_force(sim)
         work = 0.5 * (start["external"] + self.external) * du
         if start["obstacles"] is not None:
             work = work + self._obstacle_work(sim, dt, *start["obstacles"], start["force"])

@@ -9,6 +9,7 @@ from the point set.
 
 from __future__ import annotations
 
+import importlib
 import re
 from dataclasses import dataclass
 from typing import Callable
@@ -28,6 +29,17 @@ class Quantity:
     compute: Callable | None = None  # (simulation, owned rows sel) -> its values there
 
 
+def _read(path: str, every: bool = False) -> Callable:
+    """Compute with the function MODULE.NAME of parsph (of the owned rows, or with `every`
+    of all owned particles, then selected), looked up when called: parsph.readouts
+    imports the material laws, which register their quantities here."""
+    def compute(sim, sel):
+        module, _, name = path.rpartition(".")
+        function = getattr(importlib.import_module("parsph." + module), name)
+        return function(sim)[sel] if every else function(sim, sel)
+    return compute
+
+
 def _zeros_without_contact(sim, sel):
     return sim.contact.force[sel] if sim.contact else np.zeros((len(sel), sim.dim))
 
@@ -37,18 +49,18 @@ _BUILT_IN = (
     Quantity("velocity", "vector", "m/s", compute=lambda sim, sel: sim.v[sel]),
     Quantity("position", "point", "m", compute=lambda sim, sel: sim.X[sel] + sim.u[sel]),
     Quantity("reaction", "vector", "N", doc="force the constraints exert",
-             compute=lambda sim, sel: sim.reaction()[sel]),
+             compute=_read("conditions.reaction", every=True)),
     Quantity("force", "vector", "N", doc="internal, hourglass and body force",
              compute=lambda sim, sel: sim.force[sel]),
     Quantity("J", "scalar", "1", doc="volume ratio det F", compute=lambda sim, sel: sim.J[sel]),
-    Quantity("von_mises", "scalar", "Pa", compute=lambda sim, sel: sim.von_mises(sel)),
+    Quantity("von_mises", "scalar", "Pa", compute=_read("readouts.von_mises")),
     Quantity("disorder", "scalar", "1", doc="hourglass error [G eq. 26]",
-             compute=lambda sim, sel: sim.disorder()[sel]),
+             compute=_read("readouts.disorder", every=True)),
     Quantity("spacing_ratio", "scalar", "1", doc="nearest current neighbour against the smooth spacing",
-             compute=lambda sim, sel: sim.spacing_ratio()[sel]),
+             compute=_read("readouts.spacing_ratio", every=True)),
     Quantity("rank", "rank", "1", probe=False, doc="owner rank"),
     Quantity("reference_position", "point", "m", probe=False),
-    Quantity("cauchy_stress", "tensor", "Pa", probe=False, compute=lambda sim, sel: sim.cauchy_stress(sel)),
+    Quantity("cauchy_stress", "tensor", "Pa", probe=False, compute=_read("readouts.cauchy_stress")),
     Quantity("contact_force", "vector", "N", doc="force from other bodies' particles (parsph.contact)",
              compute=_zeros_without_contact),
     Quantity("body", "scalar", "1", probe=False, doc="index of the particle's body, in the scene's order",

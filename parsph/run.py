@@ -16,7 +16,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import config, quantities
-from parsph.diagnostics import RowReduction, check_finite, check_particle_ids
+from parsph.diagnostics import RowReduction, check_finite, check_particle_ids, history_row
 from parsph.errors import InputError, ParsphError
 from parsph.io import checkpoint, output_dir
 from parsph.io.history import HistoryWriter, read_reached
@@ -220,7 +220,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
             check_particle_ids(sim)
         reduction = RowReduction(COMM)
         due = reduction.add_max([history is not None and history.write_due()])
-        values = sim.diagnostics(reduction)
+        values = history_row(sim, reduction)
         check_finite(values, sim)
         if history is not None:
             history.append(values)

@@ -16,7 +16,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from parsph import config, fields
+from parsph import conditions, config, fields, state
 from parsph.collocation import BoundaryCollocation
 from parsph.errors import InputError, ParsphError
 from parsph.formulations import reference
@@ -61,7 +61,7 @@ class Topology:
         (move) and evaluate the forces in it."""
         self.move(sim)
         sim.compute_forces()
-        sim.ledger.external = sim.external_force()
+        sim.ledger.external = conditions.external_force(sim)
 
     def move(self, sim) -> bool:
         """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
@@ -107,7 +107,7 @@ class Topology:
             local = localize(owned, sets, "Xr", sim.comm, self.skin) if sets else \
                 add_ghosts(owned, "Xr", sim.comm, skin=self.skin)
         with self._failure(sim):
-            sim._adopt(local)
+            state.adopt(sim, local)
         self.rule.searched(np.concatenate([sim.Xr[: sim.n_owned],
                                            *(points.owned("Xr") for points in sim.sets.values())]))
 
@@ -131,7 +131,7 @@ class Topology:
         sim.decomp.refresh_all(*(sim.particles.arrays[name] for name in fields.migrating(sim.carried)
                                  if name != "gid"))
         if sim.eulerian and sim.all_move:
-            sim.shift[:] = sim.u  # d = 0 exactly (reference_shift)
+            sim.shift[:] = sim.u  # d = 0 exactly (state.reference_shift)
         else:
             np.subtract(sim.Xr, sim.X, out=sim.shift)
             if sim.eulerian:
@@ -192,13 +192,3 @@ class Topology:
                 "earlier (formulation.update_strain), raise the stabilisation or refine the particles")
             error.agreed = getattr(exc, "agreed", False)
             raise error from None
-
-
-def reference_shift(sim) -> np.ndarray:
-    """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
-    X^r = X + u (as it is after every move of its reference), so that d is exactly zero
-    in the new reference, whether the lists were searched or kept: its forces use the
-    stress of the last reference (formulations.tlsph.stress_at)."""
-    if sim.eulerian:
-        return np.where((sim.X + sim.u == sim.Xr) & sim.moves[:, None], sim.u, sim.Xr - sim.X)
-    return sim.Xr - sim.X

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from parsph import readouts
 from parsph.geometry import box
 from parsph.kernels.correction import reference_pairs
 from parsph.kernels.hessian import corrected_hessians
@@ -220,7 +221,7 @@ def punch(scene, overrides=()):
     x = sim.X[: sim.n_owned] + sim.u[: sim.n_owned]
     near, _ = cKDTree(x).query(x, 5)
     regular = np.percentile(near[:, 1] / near[:, 1:].mean(axis=1), 1)
-    return depth, sim.diagnostics()["tool0_force_y"], np.percentile(sim.spacing_ratio(), 1), regular, sim
+    return depth, sim.diagnostics()["tool0_force_y"], np.percentile(readouts.spacing_ratio(sim), 1), regular, sim
 
 
 def test_punch_reaches_half_compression_with_ordered_particles():

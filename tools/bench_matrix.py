@@ -71,7 +71,7 @@ from mpi4py import MPI
 from rod_error import PAPER as ROD_PAPER
 from rod_error import rod_errors
 
-from parsph import config
+from parsph import conditions, config, readouts
 from parsph.api import build, load_scene
 from parsph.analytic import bar_tip_displacement, cantilever_stiffness
 from parsph.build import build_local
@@ -186,7 +186,7 @@ def timed_run(sim, end, probe=None, every=1, at=None, clip=False):
 def beam_case(n, overrides):
     sim = simulation("beam_bending", [f"parameters.n={n}"] + overrides, comm=COMM)
     seconds, _, _ = timed_run(sim, sim.scene["time"]["end"])
-    reaction = -COMM.allreduce(sim.reaction()[sim.group_index("tip"), 1].sum()) / 1e-4
+    reaction = -COMM.allreduce(conditions.reaction(sim)[sim.group_index("tip"), 1].sum()) / 1e-4
     exact = cantilever_stiffness(100e9, 0.3, 8e-3, 1e-3, 1e-3)
     return sim, seconds, abs(reaction / exact - 1), n
 
@@ -207,7 +207,7 @@ def gathered(sim):
     """On rank 0, the owned particles and integration points of every rank, as an object
     with what bench_cantilever.errors reads of a Simulation; None on the other ranks."""
     n = sim.n_owned
-    parts = COMM.gather((sim.X[:n], sim.u[:n], sim.volume[:n], *sim.quadrature()), root=0)
+    parts = COMM.gather((sim.X[:n], sim.u[:n], sim.volume[:n], *readouts.quadrature(sim)), root=0)
     if COMM.rank != 0:
         return None
     X, u, volume, Xq, Fq, wq = (np.concatenate(p) for p in zip(*parts))

@@ -31,7 +31,7 @@ import re
 import h5py
 import numpy as np
 
-from parsph import config
+from parsph import config, readouts
 from parsph.errors import InputError, ParsphError
 from parsph.io.h5 import ParticleFile
 from parsph.io.output_dir import ensure_space
@@ -112,6 +112,20 @@ def verify(path: str, comm) -> None:
         raise ValueError("is damaged or truncated (its SHA-256 digest does not match the content)")
 
 
+def state_of(sim) -> dict:
+    """Everything io.checkpoint stores (collective: totals): per-particle arrays of the
+    owned particles (with the updated reference, if any); the accumulated totals over all
+    ranks, exact (exact_sum.Exact.to_json), and the last step's obstacle forces."""
+    return {
+        "fields": sim.particles.checkpointed(), "group_names": sim.group_names,
+        "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in sim.point_sets()[1:]},
+        "totals": {**sim.ledger.checkpoint(sim.comm), "wall_force": readouts.wall_forces(sim).tolist(),
+                   "rigid": [body.state() for body in sim.rigid_bodies]},
+        "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
+                  "updates": sim.topology.count, "since_update": sim.topology.since, "first_stable": sim.stable.first},
+    }
+
+
 def _estimate_bytes(fields: dict, scene_json: str, comm) -> int:
     local = sum(np.asarray(rows).nbytes for rows in fields.values())
     return comm.allreduce(local) + len(scene_json) + 64 * 1024 + USERBLOCK
@@ -125,7 +139,7 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
     final = os.path.join(folder, name)
     tmp = os.path.join(folder, f".{name}.tmp")
     gid = sim.gid[:sim.n_owned]
-    state = sim.checkpoint_state()
+    state = state_of(sim)
     fields = state["fields"]
     scene_json = config.to_json(scene)
     with collective():

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsph import quantities
+from parsph import quantities, readouts
 from parsph.fields import Field, register
 from parsph.materials import damage, elastic, elastoplastic, johnson_cook, mie_gruneisen
 from parsph.materials.law import Constants, Law
@@ -41,7 +41,7 @@ def _damage(sim, sel):
 # the laws' read-outs (the first law that declares a name gives its units) and the damage
 quantities.register(
     *{name: quantities.Quantity(name, "scalar", readout.units, doc=readout.doc,
-                                compute=lambda sim, sel, name=name: sim.law_readout(sel, name))
+                                compute=lambda sim, sel, name=name: readouts.law_readout(sim, sel, name))
       for law in reversed(LAWS.values()) for name, readout in law.readouts.items()}.values(),
     quantities.Quantity("damage", "scalar", "1", doc="tensile damage D (0 without damage)", compute=_damage))
 

@@ -1,0 +1,103 @@
+"""Read-outs of a simulation's state on this rank's owned particles: the registered
+quantities (parsph.quantities), the stress from the material laws, the laws' own
+read-outs, the disorder measures, the quadrature of the integration points and the
+obstacles' forces.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parsph import fields, quantities
+from parsph.exact_sum import allsum
+from parsph.formulations import tlsph
+from parsph.materials import damage, update
+
+def quantity(sim, name: str, sel: np.ndarray) -> np.ndarray:
+    """A particle quantity on the owned particles `sel` (probes and snapshots): computed as
+    parsph.quantities registers it, or a registered field's values."""
+    q = quantities.BUILT_IN.get(name)
+    if q is not None and q.compute is not None:
+        return q.compute(sim, sel)
+    if fields.known(name) and fields.get(name).units is not None:  # a registered field
+        return sim.particles.arrays[name][sel]
+    raise ValueError(name)
+
+
+def quadrature(sim) -> tuple:
+    """(X, F, w): reference positions, deformation gradients and quadrature weights of
+    this rank's owned integration points, body after body (the particles for the nodal
+    methods; particles, stress or Gauss points for the Galerkin ones)."""
+    parts = [q for b in sim.bodies for q in b.formulation.quadrature(sim, b)]
+    return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
+
+
+def disorder(sim) -> np.ndarray:
+    """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
+    out = np.empty(sim.n_owned)
+    ref = sim.ref
+    tlsph.hourglass_error(sim.dim)(sim.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, sim.d, sim.fs, out,
+                                    sim.scratch33)
+    return out
+
+
+def spacing_ratio(sim) -> np.ndarray:
+    """Current-configuration disorder of each owned particle (tlsph.spacing_ratio), with the
+    ghosts where the last force evaluation saw them."""
+    out = np.empty(sim.n_owned)
+    ref = sim.ref
+    x = sim.Xr + sim.d if sim.updated else sim.X + sim.u
+    tlsph.spacing_ratio(sim.n_owned, ref.ptr, ref.idx, x, sim.measure, sim.F, sim.dim, out, sim.scratch33)
+    return out
+
+
+def cauchy_stress(sim, sel: np.ndarray, full: bool = False) -> np.ndarray:
+    """sigma = J^-1 P(F) F^T at the owned particles `sel`, from the material law (with the
+    committed state: the stress of the last evaluation) and its damage: the dim x dim
+    block, or (full) all 3 x 3 components, the out-of-plane ones of plane strain (2D) and
+    uniaxial strain (1D) included (the law evaluated with F padded by unit stretches)."""
+    d = 3 if full else sim.dim
+    F = np.zeros((len(sel), d, d))
+    F[:, :sim.dim, :sim.dim] = sim.F[sel]
+    for a in range(sim.dim, d):
+        F[:, a, a] = 1.0
+    P = np.empty_like(F)
+    body = sim.body[sel]
+    for b in sim.bodies:
+        rows = np.arange(len(sel)) if len(sim.bodies) == 1 else np.flatnonzero(body == b.index)
+        state = np.ascontiguousarray(sim.material_state(b)[0][sel[rows]]) if b.law.state else sim.no_state
+        part = np.empty_like(F[rows])
+        update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), d, b.constants.values, state,
+                        state.copy(), part, np.empty(len(rows)), sim.step_dt)
+        if b.failure_strain is not None:
+            damage.degraded_stresses(part, np.ascontiguousarray(F[rows]), d,
+                                     np.ascontiguousarray(sim.damage_state(b)[0][sel[rows]]),
+                                     np.empty((update.WORK, 3, 3)))
+        P[rows] = part
+    return np.einsum("nab,ncb->nac", P, F) / sim.J[sel, None, None]
+
+
+def law_readout(sim, sel: np.ndarray, name: str) -> np.ndarray:
+    """The material laws' read-out `name` (materials.law.Readout) of their last stress
+    evaluation's state at the owned particles `sel` (0 for the laws without it)."""
+    out = np.zeros(len(sel))
+    for b in sim.bodies:
+        readout = b.law.readouts.get(name)
+        if readout is not None:
+            rows = np.flatnonzero(sim.body[sel] == b.index)
+            out[rows] = readout.compute(b.constants.values, sim.material_state(b)[1][sel[rows]])
+    return out
+
+
+def von_mises(sim, sel: np.ndarray) -> np.ndarray:
+    """sqrt(3/2 s:s) of the full Cauchy stress (out-of-plane components included)."""
+    s = cauchy_stress(sim, sel, full=True)
+    dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
+    return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
+
+
+def wall_forces(sim) -> np.ndarray:
+    """Each wall's and tool's force on the body in the last step, (obstacles, dim), exact
+    sums over all ranks (collective)."""
+    sums = allsum(sim.comm, sim.walls.force_sums())
+    return np.array([float(s) for s in sums]).reshape(len(sim.walls.items), sim.dim)

@@ -1,0 +1,228 @@
+"""The state of a rank: the scene's bodies (material law, formulation, owned rows) and
+their point sets. The bodies share one particle set (global ids numbered body after body,
+so each body's owned particles are a contiguous run of rows); the integration points of
+the Galerkin methods (stress points, Gauss points: formulations.galerkin) are point sets
+of their own. Which arrays a point carries, migrates, checkpoints and mirrors comes from
+the field registry (parsph.fields); a material state field NAME has a work array
+NAME_trial beside it, committed at the start of each step (points.PointSet.commit).
+Local arrays hold the owned points first, then the ghosts.
+"""
+
+from __future__ import annotations
+
+import collections
+
+import numpy as np
+
+from parsph import config, fields, materials
+from parsph.bc import BoundaryConditions, Tractions
+from parsph.collocation import BoundaryCollocation, collocated
+from parsph.contact import Contact
+from parsph.formulations import FORMULATIONS, reference, tlsph
+from parsph.neighbors import find_pairs
+from parsph.parallel.decomposition import Decomposition, LocalBody
+from parsph.parallel.mirrors import add_images
+from parsph.parallel.runtime import collective
+from parsph.points import PointSet
+
+BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
+UPDATED_STATE = ("Xr", "Fr", "measure_r", "volume_r")  # the updated reference [V §3.1]
+
+
+class Body:
+    """One body of the scene: its particles' global ids first..last-1, its material law and
+    constants, its formulation; lo..hi-1 are its owned rows on this rank."""
+
+    def __init__(self, index: int, spec: dict, first: int, last: int, dim: int):
+        self.index, self.name = index, spec["name"]
+        self.first, self.last = first, last
+        self.law = materials.LAWS[spec["material"]["model"]]
+        self.constants = materials.constants(spec["material"])
+        self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
+        self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
+        self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs
+        self.density = spec["material"]["density"]
+        self.formulation = FORMULATIONS[spec["formulation"]["type"]](spec["formulation"], dim, self.law.law_id,
+                                                                     damaged=self.failure_strain is not None)
+        self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
+        self.lo = self.hi = 0
+        self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
+        self.stages = []
+
+
+def settle(sim) -> None:
+    """What the bodies settle for the whole particle set: whether a reference moves (in
+    every step: Eulerian), the Hessian stabilisation and hourglass control the bodies
+    share, and the owners of the registered fields the particles carry (parsph.fields)."""
+    forms = [b.formulation for b in sim.bodies]
+    moving = [b.formulation for b in sim.bodies if b.moves]  # their reference moves, together (config)
+    sim.updated = bool(moving)
+    sim.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
+    sim.eta = max(f.eta for f in forms)  # the bodies with Hessian stabilisation share it (config)
+    sim.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
+    sim.hourglass = any(f.hourglass_form for f in forms)
+    # the formulations, laws and their states, the updated reference and damage the bodies use
+    sim.owners = {f.type for f in forms} | {b.law.name for b in sim.bodies} | {b.law.state for b in sim.bodies}
+    if sim.updated:
+        sim.owners.add("updated")
+    if any(b.failure_strain is not None for b in sim.bodies):
+        sim.owners.add("damage")
+    sim.carried = fields.carried(sim.owners)  # the registered fields the particles carry
+
+
+def adopt(sim, local: LocalBody) -> None:
+    """Take `local` (owned particles with two ghost layers and all their arrays) as this
+    rank's particles: mirror images across symmetry planes (parallel.mirrors), halo plan,
+    reference data in the reference configuration (X, or X^r when updated), the carried
+    fields (parsph.fields) and work arrays for owned particles and layer-1 ghosts."""
+    updated = sim.updated and "Xr" in local.fields
+    ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
+    with collective(sim.comm):
+        local, mirrors = add_images(local, ref[0], sim.scene["symmetry"], sim.comm)
+        fl, n, dim = local.fields, local.n_owned, sim.dim
+        # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
+        layer2 = sim.topology.rule.every > 1 or sim.failure.breaking
+        sim.decomp = Decomposition(local, sim.comm, mirrors, layer2=layer2)
+        body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
+        sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
+        failed = sim.failure.detached is not None and sim.failure.detached[:n].any()
+        searched = find_pairs(fl["X"], fl["support"], local.gid, n) if failed else None
+        cut = sim.failure.crack(searched, fl["X"], fl["measure"], local.gid, n, sim.failure.detached)
+        sim.ref = reference.build(
+            fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, sim.decomp.n_rows,
+            sim.scene["kernel"]["type"], body, [b.formulation.pair_options for b in sim.bodies],
+            sim.eta, sim.weighted_hessian, skin=sim.topology.skin if sim.updated else None, detached=sim.failure.detached,
+            cut=cut)
+    if layer2:
+        keep = len(local.gid)
+    else:
+        sim.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
+        keep = sim.decomp.n_rows
+    sim.n_owned = n
+    sim.gid = local.gid[:keep]
+    sim.body = body[:keep]
+    sim.moves = np.array([b.moves for b in sim.bodies])[sim.body]  # the rows whose reference moves
+    sim.all_move = bool(sim.moves.all())
+    for b in sim.bodies:
+        b.lo, b.hi = (int(k) for k in np.searchsorted(sim.gid[:n], [b.first, b.last]))
+    sim.X, sim.mass, sim.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
+    sim.measure, sim.support = fl["measure"][:keep], fl["support"][:keep]
+    sim.groups = {name: fl["groups"][:n, k].astype(bool) for k, name in enumerate(sim.group_names)}
+    sim.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
+    sim.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
+    # fields registered beyond the base and the updated reference: carried as declared
+    extra = with_trials({name: initial(sim, name, fl, keep) for name in sim.carried
+                               if name not in BASE_FIELDS and name not in UPDATED_STATE}, "particles")
+    sim.F = np.zeros((keep, dim, dim))
+    sim.d, sim.fs = sim.u, sim.F  # total-Lagrangian: the reference is X, F^r = I
+    if sim.updated:
+        eye = np.broadcast_to(np.eye(dim), (keep, dim, dim))
+        sim.Xr = fl["Xr"][:keep] if "Xr" in fl else sim.X.copy()
+        sim.Fr = np.ascontiguousarray(fl["Fr"][:keep] if "Fr" in fl else eye)
+        sim.measure_r = fl["measure_r"][:keep] if "measure_r" in fl else sim.measure.copy()
+        sim.volume_r = fl["volume_r"][:keep] if "volume_r" in fl else sim.volume.copy()
+        sim.shift = reference_shift(sim)
+        sim.d = np.zeros((keep, dim))
+        sim.fs = np.zeros((keep, dim, dim))
+    sim.f = np.zeros((keep, dim, dim) if sim.eta > 0 else (0, dim, dim))
+    sim.B = np.zeros((keep, dim, dim) if sim.eta > 0 else (0, dim, dim))
+    sim.VP = np.zeros((keep, dim, dim))
+    sim.J = np.ones(keep)
+    sim.psi = np.zeros(keep)
+    sim.no_state = np.zeros((keep, 0))  # the hyperelastic laws carry no per-point state
+    sim.broken = np.zeros(n, bool)  # failed particles (materials.damage), set at commits
+    sim.f_int = np.zeros((n, dim))
+    sim.f_hg = np.zeros((n, dim) if sim.hourglass else (0, dim))
+    sim.omega_hg2 = np.zeros(n if sim.hourglass else 0)  # written by the forces stage
+    sim.scratch33 = np.empty((3, 3))  # of the kernels of the stable step and the read-outs
+    variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in sim.bodies)
+    sim.hg_psi = np.zeros(n if variational else 0)
+    sim.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in sim.bodies)
+    sim.f_visc = np.zeros((n if sim.viscous else 0, dim))
+    sim.youngs = np.array([b.constants.youngs for b in sim.bodies])[sim.body]
+    arrays = dict(X=sim.X, measure=sim.measure, volume=sim.volume, mass=sim.mass, support=sim.support,
+                  groups=fl["groups"][:keep], u=sim.u, v=sim.v, d=sim.d, F=sim.F, fs=sim.fs, f=sim.f,
+                  B=sim.B, VP=sim.VP, J=sim.J, psi=sim.psi, youngs=sim.youngs, **extra)
+    if sim.updated:
+        arrays.update(Xr=sim.Xr, Fr=sim.Fr, measure_r=sim.measure_r, volume_r=sim.volume_r)
+    sim.particles = PointSet("particles", sim.gid, n, sim.decomp, sim.carried, arrays)
+    sim.failure.find_broken(sim)
+    sim.sets = {name: adopt_set(sim, name, other) for name, other in (local.sets or {}).items()}
+    with collective(sim.comm):  # the formulations' own relations
+        for b in sim.bodies:
+            b.formulation.build(sim, b, sim.scene["kernel"]["type"])
+    with collective(sim.comm):
+        parameters = sim.scene["parameters"]
+        sim.bcs = BoundaryConditions(sim.scene["bc"], sim.groups, sim.X[:n], sim.gid[:n], parameters,
+                                      sim.t)
+        sim.tractions = Tractions(sim.scene["tractions"], sim.groups, sim.X[:n], sim.gid[:n],
+                                   sim.measure[:n], config.thickness(sim.scene), parameters)
+    efg = any(collocated(b.formulation) for b in sim.bodies)
+    sim.collocation = BoundaryCollocation(sim) if efg and sim.scene["bc"] else None
+    sim.walls.select(sim.groups)
+    sim.contact = Contact(sim.scene["contact"], sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, n, dim,
+                           config.thickness(sim.scene), sim.comm) if sim.scene.get("contact") else None
+    sim.omega_c2 = sim.contact.omega2 if sim.contact else np.zeros(0)
+    sim.exclude_kernel_pairs()
+    for b in sim.bodies:
+        b.stages = [] if b.rigid else b.formulation.stages(sim, b)
+        if b.rigid:
+            sim.F[b.lo:b.hi] = np.eye(dim)
+
+def adopt_set(sim, name: str, local: LocalBody) -> PointSet:
+    """Another point set (stress points, Gauss points: formulations.galerkin): owned
+    points, then ghosts (within the kernel support of an owned particle), the fields it
+    carries, work arrays and halo plan; each body's rows of it."""
+    dim, fl = sim.dim, local.fields
+    rows = local.n_owned + local.n_ghost
+    carried = fields.carried(sim.owners, name)
+    arrays = with_trials({field: initial(sim, field, fl, rows, name) for field in carried}, name)
+    arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
+                  psi=np.zeros(rows))
+    if sim.updated:  # the motion from the updated reference
+        arrays["fs"] = np.zeros((rows, dim, dim))
+    body = arrays["body"][: local.n_owned]
+    for b in sim.bodies:
+        b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
+    return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, sim.comm), carried, arrays)
+
+def with_trials(arrays: dict, points: str) -> dict:
+    """`arrays` with a work array NAME_trial beside each material state field NAME: the
+    state the last stress evaluation computed (materials.update), committed at the start
+    of the next step."""
+    states = [name for name in arrays if fields.get(name, points).kind == "state"]
+    return dict(arrays, **{name + "_trial": arrays[name].copy() for name in states})
+
+
+
+def initial(sim, name: str, fl: dict, keep: int, points: str = "particles") -> np.ndarray:
+    """A registered field's values on the local rows of a point set: as carried in `fl`
+    (migrated, read from a checkpoint), else its declared initial values, else zeros."""
+    if name in fl:
+        return fl[name][:keep].copy()
+    field = fields.get(name, points)
+    if field.initial is not None:
+        return np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
+    return np.zeros((keep,) + field.shape(sim.dim))
+
+
+def reference_shift(sim) -> np.ndarray:
+    """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
+    X^r = X + u (as it is after every move of its reference), so that d is exactly zero
+    in the new reference, whether the lists were searched or kept: its forces use the
+    stress of the last reference (formulations.tlsph.stress_at)."""
+    if sim.eulerian:
+        return np.where((sim.X + sim.u == sim.Xr) & sim.moves[:, None], sim.u, sim.Xr - sim.X)
+    return sim.Xr - sim.X
+
+
+def refresh(sim, names) -> None:
+    """Refresh the ghost values of the named arrays: "NAME" of the particles, "SET.NAME"
+    of another point set."""
+    by_set = collections.defaultdict(list)
+    for name in names:
+        where, _, field = name.rpartition(".")
+        by_set[where or "particles"].append(field)
+    for points in sim.point_sets():
+        if by_set.get(points.name):
+            points.refresh(*by_set[points.name])
