@@ -25,7 +25,7 @@ from parsph import expressions, quantities
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, in_range, non_negative, one_of, positive
 from parsph.formulations import FORMULATIONS
-from parsph.materials import LAW_KEYS, LAWS, constants
+from parsph.materials import FAILURE_KEYS, LAW_KEYS, LAWS, check_failure, constants, failure_of
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
 MATERIALS = tuple(LAWS)
@@ -66,11 +66,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "model": Key("str", REQUIRED, one_of(*MATERIALS)),
         "density": Key("float", REQUIRED, positive, "reference density [kg/m^3]"),
         **LAW_KEYS,  # each law's constants (materials.LAWS)
-        "failure_strain": Key("float", None, positive,
-                              "tensile damage [G eq. 45-46]: damage grows while the largest principal log "
-                              "strain exceeds this (default: no damage; solids, particle formulations)"),
+        **FAILURE_KEYS,  # the failure models' (materials.FAILURES)
         "break_pairs": Key("bool", False, None,
-                           "with failure_strain: a failed particle (damage 1) loses its pairs, so that cracks "
+                           "with a failure model: a failed particle (damage 1) loses its pairs, so that cracks "
                            "open and the failed particles fly free (default: they keep them, as [G §4.6]); "
                            "total-Lagrangian kernels, no symmetry planes"),
     },
@@ -392,6 +390,7 @@ def _validate_material(path: str, mat: dict) -> None:
             raise InputError(f"{path}.{k} does not apply to model '{law.name}' (it takes {takes})")
     if law.check:
         law.check(path, mat)
+    check_failure(path, mat)
     given = ", ".join(f"{k} = {mat[k]:g}" for k in ("density",) + law.takes)
     try:
         moduli = constants(mat)
@@ -797,16 +796,17 @@ def validate(raw: dict) -> dict:
     scene["groups"] = _validate_groups(raw.get("groups"), dim)
     _validate_lists(scene, raw, dim)
     for body in bodies(scene):
-        if body["material"]["failure_strain"] is not None and (
-                LAWS[body["material"]["model"]].fluid or not FORMULATIONS[body["formulation"]["type"]].damage):
-            raise InputError(f"material.failure_strain: damage is for solids computed at the particles "
+        model = failure_of(body["material"])
+        if model and (LAWS[body["material"]["model"]].fluid or not FORMULATIONS[body["formulation"]["type"]].damage):
+            raise InputError(f"material.{model.key}: damage is for solids computed at the particles "
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
     for body in bodies(scene):
         mat, form = body["material"], body["formulation"]
-        if mat["break_pairs"] and (mat["failure_strain"] is None or _kept_lists(form) or scene["symmetry"]):
-            raise InputError("material.break_pairs needs material.failure_strain, a total-Lagrangian kernel "
-                             "(not ulsph, not formulation.kernel = 'eulerian') and no [[symmetry]] planes")
+        if mat["break_pairs"] and (not failure_of(mat) or _kept_lists(form) or scene["symmetry"]):
+            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1), a "
+                             "total-Lagrangian kernel (not ulsph, not formulation.kernel = 'eulerian') and no "
+                             "[[symmetry]] planes")
         if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
             del mat["break_pairs"]
     if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):

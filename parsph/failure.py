@@ -10,6 +10,7 @@ from mpi4py import MPI
 
 from parsph import conditions
 from parsph.formulations import reference
+from parsph import materials
 from parsph.materials import damage
 from parsph.neighbors import crossing, find_pairs
 from parsph.parallel.runtime import collective
@@ -24,17 +25,17 @@ class Failure:
         self.detached = None  # per local row: failed and without pairs (None if no body breaks pairs)
 
     def grow(self, sim, dt: float) -> None:
-        """Damage grows over the coming step dt from the committed state (materials.damage.grow)."""
+        """Each body's failure model advances from the committed state over the coming step dt
+        (materials.FAILURES: tensile damage grows, a Johnson-Cook index of 1 fails its point)."""
         for b in self.bodies:
-            if b.failure_strain is not None:
-                damage.grow(sim.damage_state(b)[0][b.lo:b.hi], b.failure_strain, b.constants.wave_speed,
-                            sim.support[b.lo:b.hi], dt)
+            if b.failure:
+                materials.FAILURES[b.failure].advance(sim.damage_state(b)[0][b.lo:b.hi], b, sim.support[b.lo:b.hi], dt)
         self.find_broken(sim)
 
     def find_broken(self, sim) -> None:
         """Mark the owned particles that have failed (committed damage 1)."""
         for b in sim.bodies:
-            if b.failure_strain is not None:
+            if b.failure:
                 sim.broken[b.lo:b.hi] = sim.damage_state(b)[0][b.lo:b.hi, damage.DAMAGE] >= 1.0
 
     def failed(self, state: np.ndarray | None, body: np.ndarray) -> np.ndarray | None:

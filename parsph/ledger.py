@@ -150,7 +150,7 @@ class Ledger:
             out["strain"].append([b.formulation.integrated(sim, b, lambda A: A["psi"])])
             out["plastic"].append([] if not b.law.plastic else [b.formulation.integrated(
                 sim, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work])])
-            out["damage"].append([] if b.failure_strain is None else [sim.volume[lo:hi] * _damage_work(sim, b)])
+            out["damage"].append([] if not b.failure else [sim.volume[lo:hi] * _damage_work(sim, b)])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([sim.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
             out["contact"].append([sim.contact.energy[lo:hi]] if sim.contact else [])

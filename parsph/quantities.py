@@ -58,13 +58,18 @@ _BUILT_IN = (
              compute=_read("readouts.disorder", every=True)),
     Quantity("spacing_ratio", "scalar", "1", doc="nearest current neighbour against the smooth spacing",
              compute=_read("readouts.spacing_ratio", every=True)),
-    Quantity("rank", "rank", "1", probe=False, doc="owner rank"),
-    Quantity("reference_position", "point", "m", probe=False),
+    Quantity("rank", "rank", "1", probe=False, doc="owner rank",
+             compute=lambda sim, sel: np.full(len(sel), sim.comm.rank, np.int32)),
+    Quantity("reference_position", "point", "m", probe=False, compute=lambda sim, sel: sim.X[sel]),
     Quantity("cauchy_stress", "tensor", "Pa", probe=False, compute=_read("readouts.cauchy_stress")),
     Quantity("contact_force", "vector", "N", doc="force from other bodies' particles (parsph.contact)",
              compute=_zeros_without_contact),
     Quantity("body", "scalar", "1", probe=False, doc="index of the particle's body, in the scene's order",
              compute=lambda sim, sel: sim.body[sel].astype(float)),
+    Quantity("deformation_gradient", "tensor", "1", probe=False, doc="F, from the initial configuration",
+             compute=lambda sim, sel: sim.F[sel]),
+    Quantity("mass", "scalar", "kg", compute=lambda sim, sel: sim.mass[sel]),
+    Quantity("volume", "scalar", "m^3", doc="reference volume V^0", compute=lambda sim, sel: sim.volume[sel]),
 )
 BUILT_IN = {q.name: q for q in _BUILT_IN}
 

@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsph import fields, quantities
+from parsph import fields, materials, quantities
 from parsph.exact_sum import allsum
 from parsph.formulations import tlsph
-from parsph.materials import damage, update
+from parsph.materials import update
 
-def quantity(sim, name: str, sel: np.ndarray) -> np.ndarray:
-    """A particle quantity on the owned particles `sel` (probes and snapshots): computed as
+
+def quantity(sim, name: str, sel: np.ndarray | None = None) -> np.ndarray:
+    """A particle quantity on the owned particles `sel` (all of them if None): computed as
     parsph.quantities registers it, or a registered field's values."""
+    sel = np.arange(sim.n_owned) if sel is None else sel
     q = quantities.BUILT_IN.get(name)
     if q is not None and q.compute is not None:
         return q.compute(sim, sel)
@@ -53,7 +55,7 @@ def spacing_ratio(sim) -> np.ndarray:
 
 def cauchy_stress(sim, sel: np.ndarray, full: bool = False) -> np.ndarray:
     """sigma = J^-1 P(F) F^T at the owned particles `sel`, from the material law (with the
-    committed state: the stress of the last evaluation) and its damage: the dim x dim
+    committed state: the stress of the last evaluation) and its failure model: the dim x dim
     block, or (full) all 3 x 3 components, the out-of-plane ones of plane strain (2D) and
     uniaxial strain (1D) included (the law evaluated with F padded by unit stretches)."""
     d = 3 if full else sim.dim
@@ -69,10 +71,9 @@ def cauchy_stress(sim, sel: np.ndarray, full: bool = False) -> np.ndarray:
         part = np.empty_like(F[rows])
         update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), d, b.constants.values, state,
                         state.copy(), part, np.empty(len(rows)), sim.step_dt)
-        if b.failure_strain is not None:
-            damage.degraded_stresses(part, np.ascontiguousarray(F[rows]), d,
-                                     np.ascontiguousarray(sim.damage_state(b)[0][sel[rows]]),
-                                     np.empty((update.WORK, 3, 3)))
+        if b.failure:
+            materials.FAILURES[b.failure].stresses(part, np.ascontiguousarray(F[rows]), d,
+                                                   np.ascontiguousarray(sim.damage_state(b)[0][sel[rows]]))
         P[rows] = part
     return np.einsum("nab,ncb->nac", P, F) / sim.J[sel, None, None]
 

@@ -98,7 +98,7 @@ class Simulation:
 
     def damage_state(self, body: Body) -> tuple:
         """(committed, trial) damage state arrays of `body`'s particles (empty without damage)."""
-        if body.failure_strain is None:
+        if not body.failure:
             return self.no_state, self.no_state
         return self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
 
@@ -241,8 +241,8 @@ class Simulation:
         """The owned particles of group `name` (rows)."""
         return np.flatnonzero(self.groups[name])
 
-    def quantity(self, name: str, sel: np.ndarray) -> np.ndarray:
-        """A registered quantity at the owned particles `sel` (readouts.quantity)."""
+    def quantity(self, name: str, sel: np.ndarray | None = None) -> np.ndarray:
+        """A registered quantity at the owned particles `sel`, or all (readouts.quantity)."""
         return readouts.quantity(self, name, sel)
 
     def diagnostics(self) -> dict:

@@ -38,12 +38,13 @@ class Body:
         self.first, self.last = first, last
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
-        self.failure_strain = spec["material"]["failure_strain"]  # tensile damage, if not None
+        self.failure = materials.failure_model(spec["material"])  # 0: none (materials.damage, johnson_cook_failure)
+        self.failure_strain = spec["material"]["failure_strain"]  # tensile damage's
         self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
         self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs
         self.density = spec["material"]["density"]
         self.formulation = FORMULATIONS[spec["formulation"]["type"]](spec["formulation"], dim, self.law.law_id,
-                                                                     damaged=self.failure_strain is not None)
+                                                                     failure=self.failure)
         self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0
         self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
@@ -65,7 +66,7 @@ def settle(sim) -> None:
     sim.owners = {f.type for f in forms} | {b.law.name for b in sim.bodies} | {b.law.state for b in sim.bodies}
     if sim.updated:
         sim.owners.add("updated")
-    if any(b.failure_strain is not None for b in sim.bodies):
+    if any(b.failure for b in sim.bodies):
         sim.owners.add("damage")
     sim.carried = fields.carried(sim.owners)  # the registered fields the particles carry
 

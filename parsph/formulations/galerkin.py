@@ -211,7 +211,7 @@ class GalerkinFormulation:
             raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' (its "
                              "shape functions and integration points have no mirror images); model the whole body")
 
-    def __init__(self, options: dict, dim: int, law: int, damaged: bool = False):  # damage: particle methods only
+    def __init__(self, options: dict, dim: int, law: int, failure: int = 0):  # failure: particle methods only
         self.type = options["type"]
         self.shape = "kbm" if self.type == "kbm" else "mls"
         self.points = integration_set(options)  # the other set, if any
@@ -391,7 +391,7 @@ def compile_stages(dim: int, law: int, eulerian: bool = False):
         first_bad = -1
         for q in range(lo, hi):
             gradient_row(dim, q, base[q], ptr, idx, G, d, fs)
-            bad = stress_at(dim, law, reference, False, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
+            bad = stress_at(dim, law, reference, 0, q, fs, Fr, weight[q], c, state, trial, undamaged, undamaged, P,
                             work, F, VP, J, psi, dt)
             if bad and first_bad < 0:
                 first_bad = q

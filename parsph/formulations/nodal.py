@@ -90,7 +90,7 @@ class NodalFormulation:
     def build(self, sim, body, kernel: str, search: bool = True) -> None:
         """Its relations: the particle pairs, which the loop's reference data holds."""
 
-    def __init__(self, options: dict, dim: int, law: int, damaged: bool = False):
+    def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
         self.type = options["type"]
         self.eulerian = options.get("kernel") == "eulerian"
         self.updated = self.type == "ulsph" or self.eulerian
@@ -107,7 +107,7 @@ class NodalFormulation:
             tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
         viscous = self.hourglass_form == tlsph.HOURGLASS_PAPER and self.plastic_hourglass == "viscous"
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
-            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, damaged, viscous)
+            dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, failure, viscous)
 
     @property
     def pair_options(self) -> PairOptions:
@@ -139,7 +139,7 @@ class NodalFormulation:
             out.append(Stage("kinematics+stress", displacement, writes=("d",)))
         plastic = self.plastic_hourglass == "yield_stress" and body.law.plastic is not None
         viscous = self.plastic_hourglass == "viscous" and hourglass and body.law.plastic is not None
-        if hourglass and (plastic or body.failure_strain is not None):
+        if hourglass and (plastic or body.failure):
             def hourglass_modulus():  # from the committed state: [G §4.5], and (1 - D) E
                 lo, hi = body.lo, body.hi
                 modulus = np.full(hi - lo, body.constants.youngs)
@@ -147,7 +147,7 @@ class NodalFormulation:
                     state = sim.material_state(body)[0][lo:hi]
                     modulus = np.where(state[:, body.law.plastic.strain] > 0.0,
                                        body.law.plastic.yield_stress(body.constants.values, state), modulus)
-                if body.failure_strain is not None:
+                if body.failure:
                     modulus *= damage.hourglass_factor(sim.damage_state(body)[0][lo:hi])
                 if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
                     # the penalty E_i sum_j c_ij |e_ij|^2 / 2 of the last evaluation drops with the
@@ -174,7 +174,7 @@ class NodalFormulation:
                 fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch, sim.step_dt)
             if bad >= 0:
                 raise stability.unstable_particle(sim, bad)
-        states = tuple(name for name in (body.law.state, "damage" if body.failure_strain is not None else None)
+        states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
                        if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
         out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),

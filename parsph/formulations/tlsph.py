@@ -58,7 +58,7 @@ from numba import njit
 from parsph import COMPILED_SOURCE
 from parsph.formulations.base import CompiledOnce
 from parsph.kernels.functions import value_and_slope
-from parsph.materials import damage, update
+from parsph.materials import damage, johnson_cook_failure, update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
 
@@ -81,11 +81,11 @@ VISCOUS_ONSET = 1.0e-3
 
 @functools.lru_cache(maxsize=None)
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
-                   hessian: bool = False, damaged: bool = False, viscous: bool = False):
+                   hessian: bool = False, failure: int = 0, viscous: bool = False):
     """(gradient, kinematics_stress, hessian_transpose, forces) for one body's switches:
     dimension, material law (materials.update), force row, hourglass form, reference
-    (REFERENCE_*), Hessian stabilisation, tensile damage (materials.damage: only the stages of a
-    damaged body compile it), and with the paper's hourglass form LAMMPS MACHDYN's viscous
+    (REFERENCE_*), Hessian stabilisation, the failure model (0: none, materials.damage.TENSILE or
+    materials.johnson_cook_failure: only the stages of a body with one compile it), and with the paper's hourglass form LAMMPS MACHDYN's viscous
     hourglass force for yielded pairs (`viscous`). Each stage works on the owned rows lo..hi-1.
 
     The switches are closure constants, so branches on them are folded away by the
@@ -122,7 +122,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                             fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
             else:
                 gradient_row(dim, i, i, ptr, idx, g, d, fs)
-            if stress_at(dim, law, reference, damaged, i, fs, Fr, volume[i], c, state, trial, damage_state,
+            if stress_at(dim, law, reference, failure, i, fs, Fr, volume[i], c, state, trial, damage_state,
                          damage_trial, P, work, F, VP, J, psi, dt) and first_bad < 0:
                 first_bad = i
             if hourglass == HOURGLASS_VARIATIONAL:
@@ -285,7 +285,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
-    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {reference} {hessian} {damaged} {viscous}"
+    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {reference} {hessian} {failure} {viscous}"
     return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
 
 
@@ -304,11 +304,11 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
 
 
 @njit(cache=True, inline="always")
-def stress_at(dim, law, reference, with_damage, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F,
+def stress_at(dim, law, reference, failure, i, fs, Fr, w, c, state, trial, damaged, damaged_trial, P, work, F,
               VP, J, psi, dt):
     """From the motion fs[i] (F itself in the total-Lagrangian case): F[i] = fs F^r with an
     updated or current reference, the material update (new state in trial[i]), its damage
-    (materials.damage, if with_damage), J, psi and VP[i] = w P, or w P F^rT =
+    (the `failure` model's: materials.damage, johnson_cook_failure), J, psi and VP[i] = w P, or w P F^rT =
     V^r P^r [V eq. 14] (updated), or w P F^T (current: the reference the forces use is
     the configuration F maps to). Returns whether the point is inverted or its stress not finite
     (never for a failed point, which carries no stress)."""
@@ -320,14 +320,16 @@ def stress_at(dim, law, reference, with_damage, i, fs, Fr, w, c, state, trial, d
                     s += fs[i, a, k] * Fr[i, k, b]
                 F[i, a, b] = s
     broken = False
-    if with_damage:
+    if failure:
         broken = damaged[i, damage.DAMAGE] >= 1.0
     if broken:  # failed: no stress, the law is not evaluated
         e = damage.failed(F[i], dim, damaged, damaged_trial, i, P)
     else:
         e = update.update(law, F[i], dim, c, state, trial, i, P, work, dt)
-        if with_damage:
+        if failure == damage.TENSILE:
             damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
+        elif failure == johnson_cook_failure.JOHNSON_COOK_FAILURE:
+            johnson_cook_failure.accumulate(P, F[i], dim, c, state, trial, damaged, damaged_trial, i, work, dt)
     J[i] = det(F[i], dim)
     psi[i] = e
     for a in range(dim):

@@ -122,10 +122,7 @@ class SnapshotWriter:
 
     def _values(self, sim, name: str) -> np.ndarray:
         """This rank's rows of a snapshot field (positions padded to 3D)."""
-        n = sim.n_owned
-        if name == "rank":
-            return np.full(n, self.comm.rank, np.int32)
-        data = sim.X[:n] if name == "reference_position" else sim.quantity(name, np.arange(n))
+        data = sim.quantity(name)
         if name in ("position", "reference_position") and data.shape[1] < 3:
             data = np.pad(data, ((0, 0), (0, 3 - data.shape[1])))
         return data

@@ -17,9 +17,10 @@ difference to the law's strain energy, W - psi, as damage work (all of W once th
 has failed: its strain energy is then reported as 0); strain energy + damage work is the
 work the point has taken, and the balance of the run stays checkable.
 
-The state row (committed; the stress evaluation writes the trial row): D, the largest
-principal strain at the last evaluation, W, and P and F of the last evaluation (3 x 3
-each, row-major, the model's dim x dim block used).
+The state row (committed; the stress evaluation writes the trial row): D, the failure
+index (here the largest principal strain at the last evaluation; Johnson-Cook's D:
+materials.johnson_cook_failure), W, and P and F of the last evaluation (3 x 3 each,
+row-major, the model's dim x dim block used).
 """
 
 from __future__ import annotations
@@ -29,9 +30,12 @@ import math
 import numpy as np
 from numba import njit
 
+from parsph.keys import Key, positive
 from parsph.materials.elastic import det, inverse, right_cauchy_green
 from parsph.materials.elastoplastic import symmetric_eigen
+from parsph.materials.law import FailureModel
 
+TENSILE = 1  # the failure model's id (materials.johnson_cook_failure is another)
 COLUMNS = 21
 DAMAGE, STRAIN, WORK, STRESS, PREVIOUS = 0, 1, 2, 3, 12
 RATE = 0.4  # damage front speed over the sound speed [G eq. 45]
@@ -77,7 +81,7 @@ def degrade(P, F, dim, state, trial, i, work):
                 for m in range(dim):
                     s += N[a, k] * values[k] * N[m, k] * Finv[b, m]
             P[a, b] = J * s
-    _record(P, F, dim, state, trial, i)
+    record(P, F, dim, state, trial, i)
 
 
 @njit(cache=True, _nrt=False)
@@ -87,13 +91,13 @@ def failed(F, dim, state, trial, i, P):
     for a in range(dim):
         for b in range(dim):
             P[a, b] = 0.0
-    _record(P, F, dim, state, trial, i)
+    record(P, F, dim, state, trial, i)
     trial[i, STRAIN] = state[i, STRAIN]
     return 0.0
 
 
 @njit(cache=True, inline="always")
-def _record(P, F, dim, state, trial, i):
+def record(P, F, dim, state, trial, i):
     """trial[i]: D, W += (P_n + P) : (F - F_n) / 2, P and F of this evaluation."""
     work_done = 0.0
     for a in range(dim):
@@ -107,8 +111,7 @@ def _record(P, F, dim, state, trial, i):
 
 
 @njit(cache=True)
-def degraded_stresses(P, F, dim, state, work):
-    """The damaged stress of every row of a stack (output): degrade, or 0 for failed rows."""
+def _degraded(P, F, dim, state, work):
     trial = state.copy()
     for n in range(F.shape[0]):
         if state[n, DAMAGE] >= 1.0:
@@ -130,3 +133,24 @@ def grow(state: np.ndarray, failure_strain: float, speed: float, support: np.nda
 def hourglass_factor(state: np.ndarray) -> np.ndarray:
     """1 - D: the share of E a damaged point keeps in its hourglass force."""
     return 1.0 - state[:, DAMAGE]
+
+
+def degraded_stresses(P: np.ndarray, F: np.ndarray, dim: int, state: np.ndarray) -> None:
+    """The damaged stress of every row of a stack (in place): degrade, or 0 for failed rows."""
+    _degraded(P, F, dim, state, np.empty((5, 3, 3)))
+
+
+KEYS = dict(failure_strain=Key("float", None, positive,
+                               "tensile damage [G eq. 45-46]: damage grows while the largest principal log strain "
+                               "exceeds this (default: no damage; solids, particle formulations)"))
+
+
+def _advance(state: np.ndarray, body, support: np.ndarray, dt: float) -> None:
+    grow(state, body.failure_strain, body.constants.wave_speed, support, dt)
+
+
+def _index(state: np.ndarray, body) -> np.ndarray:
+    return state[:, STRAIN] / body.failure_strain
+
+
+MODEL = FailureModel("tensile", TENSILE, KEYS, _advance, degraded_stresses, _index)

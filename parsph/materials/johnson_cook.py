@@ -110,6 +110,12 @@ def temperature(c: np.ndarray, state: np.ndarray, o: int = BASE) -> np.ndarray:
     return c[o + ROOM] + c[o + HEAT] * state[:, PLASTIC_WORK]
 
 
+def failure_terms(c: np.ndarray, o: int = BASE) -> tuple:
+    """(eps_dot_0, T* per unit plastic work): the rate and temperature the failure models
+    read (materials.johnson_cook_failure)."""
+    return c[o + RATE0], c[o + HEAT] / (c[o + MELT] - c[o + ROOM])
+
+
 def values(m: dict) -> tuple:
     """(A, B, n, C, m, eps_dot_0, T_room, T_melt, beta / (rho0 c_p)) of a material table."""
     beta = 0.9 if m["taylor_quinney"] is None else m["taylor_quinney"]
@@ -146,5 +152,5 @@ TEMPERATURE = Readout("K", "temperature (johnson_cook; 0 for the other laws)", t
 LAW = Law(
     "johnson_cook", JOHNSON_COOK, dict(ISOTROPIC_KEYS, **KEYS), _constants, optional=OPTIONAL,
     state="plastic_state", check=check, doc="Johnson & Cook 1983",
-    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state),
+    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state, failure_terms),
     readouts=dict(READOUTS, temperature=TEMPERATURE))

@@ -41,6 +41,9 @@ class Plastic:
     work: int  # the state's column of the plastic work per unit reference volume
     yield_stress: Callable  # (constants values, state rows) -> current yield stress per row
     keep_elastic: Callable  # (state rows, F_old, F_new): the elastic state kept when F jumps (in place)
+    # (constants values) -> (reference strain rate, homologous temperature T* per unit plastic work) of the
+    # failure models (materials.johnson_cook_failure); None: 1/s and no heating
+    failure_terms: Callable | None = None
 
 
 @dataclass(frozen=True)
@@ -73,3 +76,24 @@ class Law:
 
     def __post_init__(self):
         object.__setattr__(self, "takes", tuple(k for k in self.keys if k not in self.optional))
+
+
+@dataclass(frozen=True)
+class FailureModel:
+    """A failure model over the laws: damage at the particles (materials.damage's state row),
+    enabled by its first key, with the id of its branch of the compiled stress update
+    (formulations.tlsph.stress_at)."""
+
+    name: str
+    failure_id: int
+    keys: dict  # {key: Key} of the material table it takes; the first enables it
+    advance: Callable  # (committed state rows, body, support rows, dt): failure at the step's start, in place
+    stresses: Callable  # (P, F, dim, committed state rows): the stress the model leaves of the law's, in place
+    index: Callable  # (committed state rows, body) -> its failure index per row (1: failing)
+    check: Callable | None = None  # (path, material table, its law) -> None: raises InputError
+    constants: Callable | None = None  # (material table, its law, the law's values) -> values appended to them
+
+    @property
+    def key(self) -> str:
+        """The material key that enables it."""
+        return next(iter(self.keys))

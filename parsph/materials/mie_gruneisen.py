@@ -75,10 +75,12 @@ def update(F, dim, c, state, trial, i, P, work, dt):
         1.0 + 0.5 * c[GAMMA] * dJ)
     energy = state[i, ENERGY] - 0.5 * (state[i, PRESSURE] + p) * dJ
     trial[i, ENERGY], trial[i, LAST_J], trial[i, PRESSURE] = energy, J, p
-    Finv = work[1]
+    Finv, tau = work[1], work[5]
     for a in range(dim):
         for b in range(dim):
             P[a, b] -= p * J * Finv[b, a]
+    for a in range(3):  # the whole Kirchhoff stress, as the plastic laws leave it (failure models)
+        tau[a, a] -= p * J
     return psi + energy
 
 
@@ -104,6 +106,11 @@ def temperature(c: np.ndarray, state: np.ndarray) -> np.ndarray:
     if _johnson_cook(c):
         return johnson_cook.temperature(c, state, STRENGTH + 1)
     return np.zeros(len(state))
+
+
+def failure_terms(c: np.ndarray) -> tuple:
+    """Johnson-Cook's rate and heating with its strength (materials.johnson_cook.failure_terms)."""
+    return johnson_cook.failure_terms(c, STRENGTH + 1) if _johnson_cook(c) else (1.0, 0.0)
 
 
 def _constants(m: dict):
@@ -139,7 +146,8 @@ LAW = Law(
      "yield_stress": YIELD_STRESS,
      **johnson_cook.KEYS},
     _constants, optional=("yield_stress", *johnson_cook.KEYS), state="shock_state", check=_check,
-    doc="Meyers 1994, ch. 4", plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state),
+    doc="Meyers 1994, ch. 4", plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state,
+                                                 failure_terms),
     readouts=dict(READOUTS, temperature=Readout("K", johnson_cook.TEMPERATURE.doc, temperature)))
 for _points in ("particles", "stress_points", "gauss_points"):
     register(Field("shock_state", "state", owner="shock_state", points=_points, columns=PRESSURE + 1,
