@@ -44,8 +44,8 @@ def test_a_body_moves_as_it_would_alone(hessian):
     steel = both.bodies[0]
     assert (steel.lo, steel.hi) == (0, alone.n_owned)
     assert both.t == alone.t
-    assert np.array_equal(both.u[:alone.n_owned], alone.u[:alone.n_owned])
-    assert np.array_equal(both.v[:alone.n_owned], alone.v[:alone.n_owned])
+    for name in ("displacement", "velocity"):
+        assert np.array_equal(both.quantity(name)[:alone.n_owned], alone.quantity(name)), name
     d_both, d_alone = both.diagnostics(), alone.diagnostics()
     for name in ("kinetic_energy", "strain_energy", "hourglass_energy", "total_energy"):
         assert d_both[f"{name}.steel"] == d_alone[name]
@@ -77,12 +77,14 @@ def test_an_updated_body_moves_beside_a_total_lagrangian_one_as_each_alone(updat
     lo, hi = both.bodies[1].lo, both.bodies[1].hi
     n = rubber.n_owned
     assert hi - lo == n and both.bodies[0].hi == steel.n_owned
-    for name in ("u", "v", "F", "Xr"):
-        assert np.array_equal(getattr(both, name)[lo:hi], getattr(rubber, name)[:n]), name
-    assert np.array_equal(both.Xr[:lo], both.X[:lo])  # the steel block's reference stays
-    scale = np.abs(steel.u[: steel.n_owned]).max()
-    assert np.abs(both.u[:lo] - steel.u[:lo]).max() < 1e-10 * scale
-    assert np.abs(both.v[:lo] - steel.v[:lo]).max() < 1e-8 * np.abs(steel.v[:lo]).max()
+    for name in ("displacement", "velocity", "deformation_gradient"):
+        assert np.array_equal(both.quantity(name, np.arange(lo, hi)), rubber.quantity(name)), name
+    assert np.array_equal(both.Xr[lo:hi], rubber.Xr[:n]), "Xr"
+    assert np.array_equal(both.Xr[:lo], both.quantity("reference_position")[:lo])  # the steel block's reference stays
+    u, v = steel.quantity("displacement"), steel.quantity("velocity")
+    scale = np.abs(u).max()
+    assert np.abs(both.quantity("displacement")[:lo] - u[:lo]).max() < 1e-10 * scale
+    assert np.abs(both.quantity("velocity")[:lo] - v[:lo]).max() < 1e-8 * np.abs(v[:lo]).max()
     d_both, d_rubber = both.diagnostics(), rubber.diagnostics()
     for name in ("kinetic_energy", "strain_energy", "hourglass_energy"):
         assert d_both[f"{name}.rubber"] == d_rubber[name]
@@ -106,7 +108,7 @@ def test_each_body_has_its_material_and_formulation():
     assert (steel.formulation.type, rubber.formulation.type) == ("tlsph", "sph")
     assert steel.formulation.alpha == 50.0 and rubber.formulation.alpha == 0.0
     assert np.all(sim.youngs[sim.body == 0] == 200e9) and np.all(sim.youngs[sim.body == 1] == 0.3e9)
-    assert sim.mass[sim.body[:sim.n_owned] == 1].max() == pytest.approx(1100.0 * 0.005 ** 2)
+    assert sim.quantity("mass")[sim.quantity("body") == 1].max() == pytest.approx(1100.0 * 0.005 ** 2)
 
 
 @pytest.mark.parametrize("change, message", [

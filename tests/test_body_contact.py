@@ -194,7 +194,7 @@ def test_self_contact_of_one_body_is_contact_of_two_where_the_kernel_does_not_jo
         sim = simulation(bars_with_a_gap(one_body))
         assert len(sim.bodies) == (1 if one_body else 2)
         h = run_until(sim, 1.4e-4, every=50)
-        runs.append((sim.X + sim.u, sim.v.copy(), h))
+        runs.append((sim.quantity("position"), sim.quantity("velocity"), h))
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
     h = runs[1][2]
     assert h["contact_energy"].max() > 0 and h["left_velocity"][-1] == pytest.approx(-10.0, rel=0.05)
@@ -237,7 +237,7 @@ def test_steel_disk_perforates_the_aluminium_plate_with_the_energy_balance_close
                                       f'formulation.hourglass_form="{form}"'])
     h = run_until(sim, 1.5e-5, every=50)
     body = sim.bodies[1]
-    centre = (sim.X[body.lo:body.hi, 1] + sim.u[body.lo:body.hi, 1]).mean()
+    centre = sim.quantity("position", np.arange(body.lo, body.hi))[:, 1].mean()
     assert centre < -4.0e-3  # below the plate's back face
     assert -500.0 < h["projectile_velocity"][-1] < -400.0
     assert h["damage_max"][-1] == 1.0 and h["plastic_strain_max"][-1] > 0.5

@@ -51,10 +51,9 @@ type = "velocity"
 value = [0.3, 1.0]
 """
     sim = simulation(block_2d(extra=tool))
-    n = sim.n_owned
 
     def momentum():
-        return (sim.mass[:n, None] * sim.v[:n]).sum(axis=0)
+        return (sim.quantity("mass")[:, None] * sim.quantity("velocity")).sum(axis=0)
 
     start = momentum()
     impulse = np.zeros(2)

@@ -30,13 +30,12 @@ def scene_text(expression, kind="velocity_field"):
 
 def test_velocity_and_displacement_fields_take_the_value_of_the_expression_at_each_particle():
     sim = simulation(scene_text('["exp(-a*(x-0.5)**2) * sin(y)", "-y/2 + minimum(x, 0.3)"]'))
-    n = sim.n_owned
-    X = sim.X[:n]
-    assert np.allclose(sim.v[:n, 0], np.exp(-3.0 * (X[:, 0] - 0.5) ** 2) * np.sin(X[:, 1]), rtol=1e-15, atol=0)
-    assert np.allclose(sim.v[:n, 1], -X[:, 1] / 2 + np.minimum(X[:, 0], 0.3), rtol=1e-15, atol=1e-17)
+    X, v = sim.quantity("reference_position"), sim.quantity("velocity")
+    assert np.allclose(v[:, 0], np.exp(-3.0 * (X[:, 0] - 0.5) ** 2) * np.sin(X[:, 1]), rtol=1e-15, atol=0)
+    assert np.allclose(v[:, 1], -X[:, 1] / 2 + np.minimum(X[:, 0], 0.3), rtol=1e-15, atol=1e-17)
     sim = simulation(scene_text('["1e-3*x*y", "0"]', kind="displacement_field"))
-    assert np.allclose(sim.u[:n, 0], 1e-3 * X[:, 0] * X[:, 1], rtol=1e-15, atol=0)
-    assert not sim.v[:n].any()
+    assert np.allclose(sim.quantity("displacement")[:, 0], 1e-3 * X[:, 0] * X[:, 1], rtol=1e-15, atol=0)
+    assert not sim.quantity("velocity").any()
 
 
 @pytest.mark.parametrize("expression, message", [

@@ -52,7 +52,7 @@ def impose_affine(sim, H=H_AFFINE):
 
 def edge_row(sim) -> np.ndarray:
     """Lattice particles: how many rows each lies from the nearest free edge (0 = on it)."""
-    X = sim.X[: sim.n_owned]
+    X = sim.quantity("reference_position")
     lo, hi = X.min(axis=0), X.max(axis=0)
     return np.rint(np.minimum(X - lo, hi - X).min(axis=1) / SPACING).astype(int)
 
@@ -66,23 +66,24 @@ def test_affine_motion_of_a_lattice_rlm_exact_everywhere_sph_only_in_the_interio
     scale = np.abs(H).max()
     rlm = lattice("rlm")
     impose_affine(rlm)
-    n = rlm.n_owned
-    assert np.abs(rlm.F[:n] - (np.eye(2) + H)).max() < 1e-13  # measured 4.4e-16 (corners included)
+    F = rlm.quantity("deformation_gradient")
+    assert np.abs(F - (np.eye(2) + H)).max() < 1e-13  # measured 4.4e-16 (corners included)
 
     sph = lattice("sph")
     impose_affine(sph)
     row = edge_row(sph)
-    err = np.abs(sph.F[:n] - (np.eye(2) + H)).max(axis=(1, 2))
+    F = sph.quantity("deformation_gradient")
+    err = np.abs(F - (np.eye(2) + H)).max(axis=(1, 2))
     # interior (full 8-neighbour support): F = I + m H exactly, m = 1.0131 from the kernel alone
     assert (row >= 1).sum() == 14 * 14
-    assert np.abs(sph.F[:n][row >= 1] - (np.eye(2) + M_LATTICE * H)).max() < 1e-13
+    assert np.abs(F[row >= 1] - (np.eye(2) + M_LATTICE * H)).max() < 1e-13
     assert err[row >= 1].max() == pytest.approx((M_LATTICE - 1) * scale, rel=1e-9)  # 2.6e-4
     # on the left and right edges (corners aside) the x-moment is halved: F_xx = 1 + (m/2) H_xx
-    X = sph.X[:n]
+    X = sph.quantity("reference_position")
     side = (row == 0) & (np.minimum(X[:, 1], 1.6 - X[:, 1]) > 1.5 * SPACING)
     side &= np.minimum(X[:, 0], 1.6 - X[:, 0]) < SPACING
     assert side.sum() == 2 * 12
-    assert np.abs(sph.F[:n][side, 0, 0] - (1 + 0.5 * M_LATTICE * H[0, 0])).max() < 1e-13
+    assert np.abs(F[side, 0, 0] - (1 + 0.5 * M_LATTICE * H[0, 0])).max() < 1e-13
     # so the edge error is ~half the imposed gradient, 47x the interior one (measured 0.0124)
     assert err[row == 0].max() > 0.45 * scale
     assert err[row == 0].max() > 20 * err[row >= 1].max()
@@ -94,14 +95,14 @@ def test_affine_motion_of_a_random_set_rlm_exact_sph_not_even_inside():
     rlm = random_patch("rlm")
     impose_affine(rlm)
     n = rlm.n_owned
-    assert np.abs(rlm.F[:n] - (np.eye(2) + H)).max() < 1e-13  # measured 6.7e-16
+    assert np.abs(rlm.quantity("deformation_gradient") - (np.eye(2) + H)).max() < 1e-13  # measured 6.7e-16
 
     sph = random_patch("sph")
     impose_affine(sph)
-    X = sph.X[:n]
+    X = sph.quantity("reference_position")
     inside = np.minimum(X, 1.0 - X).min(axis=1) > sph.support[:n]  # support not cut by the edge
     assert inside.sum() > 60
-    err = np.abs(sph.F[:n] - (np.eye(2) + H)).max(axis=(1, 2))
+    err = np.abs(sph.quantity("deformation_gradient") - (np.eye(2) + H)).max(axis=(1, 2))
     # an irregular set breaks the lattice's symmetry: no linear completeness anywhere
     # (measured max error 0.0029 = 0.14 |H| inside, 0.015 = 0.75 |H| near the boundary)
     assert err[inside].max() > 0.05 * scale
@@ -115,7 +116,7 @@ def test_affine_motion_of_a_random_set_rlm_exact_sph_not_even_inside():
     for sim in (tl, rlm):
         sim.u[:] = u
         sim.compute_forces()
-    assert np.array_equal(rlm.F[:n], tl.F[:n])
+    assert np.array_equal(rlm.quantity("deformation_gradient"), tl.quantity("deformation_gradient"))
 
 
 def test_uniform_stress_interior_forces_vanish_edge_forces_carry_m_or_twice_the_traction():
@@ -128,16 +129,17 @@ def test_uniform_stress_interior_forces_vanish_edge_forces_carry_m_or_twice_the_
         sim = lattice(ftype)
         impose_affine(sim)
         n = sim.n_owned
-        X, row = sim.X[:n], edge_row(sim)
-        scale = np.abs(sim.force).max()
+        X, row = sim.quantity("reference_position"), edge_row(sim)
+        force = sim.quantity("force")
+        scale = np.abs(force).max()
         # sph: the first inner row still sees the edge row's different stress; rlm: P is
         # uniform everywhere (exact F), so only the edge row is loaded
-        assert np.abs(sim.force[row >= deep]).max() < 1e-12 * scale, ftype
-        assert np.abs(sim.force[row < deep]).max() == scale
-        P = sim.VP[:n] / sim.volume[:n, None, None]
+        assert np.abs(force[row >= deep]).max() < 1e-12 * scale, ftype
+        assert np.abs(force[row < deep]).max() == scale
+        P = sim.VP[:n] / sim.quantity("volume")[:, None, None]
         middle = np.argmin(np.abs(X - 0.75).sum(axis=1))
         along = (np.abs(X[:, 1] - 0.75) < 1e-9) & (X[:, 0] > 0.8)  # a row, middle to right edge
-        row_force = sim.force[along].sum(axis=0)
+        row_force = force[along].sum(axis=0)
         assert np.allclose(row_force, -expected * P[middle][:, 0] * SPACING, rtol=1e-12, atol=0), ftype
 
 
@@ -155,7 +157,7 @@ def test_sph_force_is_the_energy_gradient_rlm_force_is_not():
         du = rng.standard_normal((n, 2))
         sim.u[:n] = u0
         sim.compute_forces()
-        power = -(sim.force * du).sum()
+        power = -(sim.quantity("force") * du).sum()
         eps = 1e-6
         energies = []
         for sign in (1.0, -1.0):
@@ -177,20 +179,22 @@ def test_linear_momentum_sph_conserved_to_round_off_rlm_drifts():
     for ftype in ("sph", "rlm"):
         sim = simulation(block_2d(), [f'formulation.type="{ftype}"', *KERNEL])
         n = sim.n_owned
-        x, y = sim.X[:n, 0], sim.X[:n, 1]
+        X = sim.quantity("reference_position")
+        x, y = X[:, 0], X[:, 1]
         sim.v[:n, 0] = 0.5 * np.sin(np.pi * x) * np.cos(2.0 * y)
         sim.v[:n, 1] = 0.3 * np.cos(1.5 * x) * np.sin(np.pi * y / 0.6)
-        m = sim.mass[:n, None]
-        p0 = (m * sim.v[:n]).sum(axis=0)
-        scale = (m * np.abs(sim.v[:n])).sum()
+        m = sim.quantity("mass")[:, None]
+        p0 = (m * sim.quantity("velocity")).sum(axis=0)
+        scale = (m * np.abs(sim.quantity("velocity"))).sum()
         worst, worst_force = 0.0, 0.0
         for _ in range(200):
             sim.step()
-            worst = max(worst, np.abs((m * sim.v[:n]).sum(axis=0) - p0).max() / scale)
-            worst_force = max(worst_force, np.abs(sim.force.sum(axis=0)).max() / np.abs(sim.force).sum())
+            worst = max(worst, np.abs((m * sim.quantity("velocity")).sum(axis=0) - p0).max() / scale)
+            force = sim.quantity("force")
+            worst_force = max(worst_force, np.abs(force.sum(axis=0)).max() / np.abs(force).sum())
         drift[ftype], net_force[ftype] = worst, worst_force
         d = sim.diagnostics()
-        assert np.allclose([d["momentum_x"], d["momentum_y"]], (m * sim.v[:n]).sum(axis=0), rtol=1e-12)
+        assert np.allclose([d["momentum_x"], d["momentum_y"]], (m * sim.quantity("velocity")).sum(axis=0), rtol=1e-12)
     assert drift["sph"] < 1e-13  # measured 2.5e-16
     assert net_force["sph"] < 1e-14  # measured 1.4e-17 of sum |f|
     assert drift["rlm"] > 1e-2  # measured 0.097: 14 orders of magnitude above round-off
@@ -212,7 +216,7 @@ def bar(ftype: str, periods: float = 2.0, extra=()):
     while sim.t < end * (1 - 1e-12):
         sim.step(end)
         t.append(sim.t)
-        u.append(sim.u[tip, 0])
+        u.append(sim.quantity("displacement", [tip])[0, 0])
         if sim.step_count % 10 == 0:
             energy.append(sim.diagnostics()["total_energy"])
     return np.array(t), np.array(u), np.array(energy)
@@ -273,9 +277,9 @@ def test_beam_bending_undamped_sph_balances_energy_rlm_does_not():
         sim = beam(ftype, ["time.end=6e-5", "time.damping=0"])
         tip = sim.group_index("tip")
         rows = run_until(sim, 6e-5, every=25)
-        n = sim.n_owned
-        assert np.isfinite(sim.u[:n]).all() and np.isfinite(sim.v[:n]).all() and sim.J[:n].min() > 0.9
-        assert sim.u[tip, 1] == pytest.approx(-1e-4, rel=1e-12)
+        assert np.isfinite(sim.quantity("displacement")).all() and np.isfinite(sim.quantity("velocity")).all()
+        assert sim.quantity("J").min() > 0.9
+        assert sim.quantity("displacement", tip)[:, 1] == pytest.approx(-1e-4, rel=1e-12)
         work = rows["external_work"]
         stored = rows["kinetic_energy"] + rows["strain_energy"]
         assert work[-1] > 0 and np.abs(stored).max() < 2 * np.abs(work).max(), ftype  # bounded

@@ -68,17 +68,17 @@ def test_quarter_with_two_planes_moves_as_the_whole_block(formulation):
     whole = simulation(pressed_block(False, formulation))
     n = quarter.n_owned
     assert whole.n_owned == 4 * n
-    gap, match = cKDTree(whole.X).query(quarter.X[:n])
+    gap, match = cKDTree(whole.quantity("reference_position")).query(quarter.quantity("reference_position"))
     assert gap.max() < 1e-15
     for _ in range(150):
         quarter.step()
         whole.step()
     if quarter.updated:
         assert quarter.topology.count == whole.topology.count == 15
-    scale = np.abs(whole.u).max()
+    scale = np.abs(whole.quantity("displacement")).max()
     assert scale > 1e-4  # the tools went 0.15 mm deep
-    assert np.abs(quarter.u[:n] - whole.u[match]).max() < 1e-10 * scale
-    assert np.abs(quarter.v[:n] - whole.v[match]).max() < 1e-8
+    assert np.abs(quarter.quantity("displacement") - whole.quantity("displacement", match)).max() < 1e-10 * scale
+    assert np.abs(quarter.quantity("velocity") - whole.quantity("velocity", match)).max() < 1e-8
     force = quarter.diagnostics()["tool0_force_y"]
     assert force < -1.0  # measured -27 N per metre of thickness: half of the whole block's top tool
     assert force == pytest.approx(0.5 * whole.diagnostics()["tool0_force_y"], rel=1e-9)

@@ -122,7 +122,7 @@ def test_stabilised_forces_are_minus_the_gradient_of_the_energy(over):
         return sim.ledger.local(sim, "strain") + sim.ledger.local(sim, "hourglass")
 
     energy()
-    force = sim.force.copy()
+    force = sim.quantity("force")
     numeric = np.zeros_like(force)
     eps = 1e-6
     sel = np.arange(0, n, 5)
@@ -136,18 +136,19 @@ def test_reference_update_keeps_deformation_stress_and_energy():
     strain energy are unchanged and the motion since the reference is the identity."""
     sim = simulation(block_2d(model="neo_hookean"), UL + ["formulation.update_every=1000"])
     n = sim.n_owned
-    sim.u[:n] = 0.05 * np.sin(3 * sim.X[:n, ::-1]) + sim.X[:n] @ np.array([[0.1, 0.05], [-0.02, 0.08]]).T
+    X = sim.quantity("reference_position")
+    sim.u[:n] = 0.05 * np.sin(3 * X[:, ::-1]) + X @ np.array([[0.1, 0.05], [-0.02, 0.08]]).T
     sim.compute_forces()
-    F, J, energy = sim.F[:n].copy(), sim.J[:n].copy(), sim.ledger.local(sim, "strain")
-    volume = sim.volume[:n].sum()
+    F, J, energy = sim.quantity("deformation_gradient"), sim.quantity("J"), sim.ledger.local(sim, "strain")
+    volume = sim.quantity("volume").sum()
     sim.topology.update(sim)
     assert np.abs(sim.fs[:n] - np.eye(2)).max() < 1e-14
-    assert np.abs(sim.F[:n] - F).max() < 1e-14
-    assert np.abs(sim.J[:n] - J).max() < 1e-14
+    assert np.abs(sim.quantity("deformation_gradient") - F).max() < 1e-14
+    assert np.abs(sim.quantity("J") - J).max() < 1e-14
     assert abs(sim.ledger.local(sim, "strain") - energy) < 1e-12 * energy
-    assert np.allclose(sim.volume_r[:n].sum(), (J * sim.volume[:n]).sum(), rtol=1e-14)
-    assert np.allclose(sim.volume[:n].sum(), volume)  # V^0 is kept for the stress
-    assert np.allclose(sim.Xr[:n], sim.X[:n] + sim.u[:n], rtol=0, atol=1e-15)
+    assert np.allclose(sim.volume_r[:n].sum(), (J * sim.quantity("volume")).sum(), rtol=1e-14)
+    assert np.allclose(sim.quantity("volume").sum(), volume)  # V^0 is kept for the stress
+    assert np.allclose(sim.Xr[:n], sim.quantity("position"), rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize("eta", [0.0, 1.0])
@@ -157,7 +158,7 @@ def test_rigid_rotation_through_many_references_gives_no_strain_or_stress(eta):
     sim = simulation(block_2d(model="neo_hookean"), UL + ["formulation.update_every=1000",
                                                            f"formulation.hessian={eta}"])
     n = sim.n_owned
-    X = sim.X[:n].copy()
+    X = sim.quantity("reference_position")
     for k in range(1, 10):
         a = np.radians(10.0 * k)
         R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
@@ -165,9 +166,10 @@ def test_rigid_rotation_through_many_references_gives_no_strain_or_stress(eta):
         sim.compute_forces()
         sim.topology.update(sim)
     assert sim.topology.count == 9
-    assert np.abs(sim.F[:n] - R).max() < 1e-12
-    assert np.abs(sim.force).max() < 1e-9 * sim.bodies[0].constants.youngs * sim.volume[:n].max() / 0.1
-    assert abs(sim.ledger.local(sim, "strain")) < 1e-15 * sim.bodies[0].constants.youngs * sim.volume[:n].sum()
+    assert np.abs(sim.quantity("deformation_gradient") - R).max() < 1e-12
+    volume = sim.quantity("volume")
+    assert np.abs(sim.quantity("force")).max() < 1e-9 * sim.bodies[0].constants.youngs * volume.max() / 0.1
+    assert abs(sim.ledger.local(sim, "strain")) < 1e-15 * sim.bodies[0].constants.youngs * volume.sum()
 
 
 def test_spinning_body_with_updates_keeps_its_angular_momentum():
@@ -181,13 +183,14 @@ center = [0.5, 0.3]
     assert sim.topology.count > 100
     L = rows["angular_momentum"]
     assert np.abs(L - L[0]).max() < 1e-10 * abs(L[0])
-    assert np.abs(np.arctan2(sim.F[:, 1, 0], sim.F[:, 0, 0])).max() > 0.5  # it turned
+    F = sim.quantity("deformation_gradient")
+    assert np.abs(np.arctan2(F[:, 1, 0], F[:, 0, 0])).max() > 0.5  # it turned
 
 
 def bar_tip(overrides, end=3.2e-3):
     sim = simulation("bar1d", overrides)
     tip = sim.group_index("B")[0]
-    rows = run_until(sim, end, probe=lambda s: s.u[tip, 0])
+    rows = run_until(sim, end, probe=lambda s: s.quantity("displacement", [tip])[0, 0])
     return rows, sim
 
 
@@ -217,8 +220,8 @@ def punch(scene, overrides=()):
     reference can absorb disorder the spacing ratio then misses), and the simulation."""
     sim = simulation(scene, overrides)
     run_until(sim, sim.scene["time"]["end"], every=1000)
-    depth = -sim.u[sim.group_index("center"), 1].mean()
-    x = sim.X[: sim.n_owned] + sim.u[: sim.n_owned]
+    depth = -sim.quantity("displacement", sim.group_index("center"))[:, 1].mean()
+    x = sim.quantity("position")
     near, _ = cKDTree(x).query(x, 5)
     regular = np.percentile(near[:, 1] / near[:, 1:].mean(axis=1), 1)
     return depth, sim.diagnostics()["tool0_force_y"], np.percentile(readouts.spacing_ratio(sim), 1), regular, sim

@@ -93,4 +93,4 @@ def test_lagrangian_kernel_fails_in_the_funnel_with_a_message():
                                           r"first one .*: particle \d+ at \(.*\) is the most flattened"):
         while sim.t < 0.4:
             sim.step(0.4)
-    assert np.isfinite(sim.u).all() and np.isfinite(sim.v).all()
+    assert np.isfinite(sim.quantity("displacement")).all() and np.isfinite(sim.quantity("velocity")).all()
