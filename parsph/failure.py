@@ -1,6 +1,7 @@
-"""Failure: damage growing at each commit (materials.damage), the failed particles, and
-for the bodies whose failed particles lose their pairs (material.break_pairs) the pairs
-they cut, with the reference data built again without them: cracks open.
+"""Failure: each body's failure model advanced at the start of a step (materials.FAILURES:
+tensile damage grows, a Johnson-Cook index of 1 fails its point), the failed particles,
+and for the bodies whose failed particles lose their pairs (material.break_pairs) the
+pairs they cut, with the reference data built again without them: cracks open.
 """
 
 from __future__ import annotations

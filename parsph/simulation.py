@@ -1,11 +1,11 @@
 """`Simulation`: the loop over one rank's particles of every body. A step is
 velocity-Verlet (kick-drift-kick leap-frog):
-    commit the material state, grow damage, break pairs        (points, failure)
-    v += dt/2 a;  constrained v;  u += dt v;  constrained u     (conditions)
+    commit the material state, advance failure, break pairs   (points, failure)
+    v += dt/2 a;  constrained v;  u += dt v;  constrained u   (conditions)
     obstacles; the formulations' stages, phase by phase, with the ghost refreshes their
         declarations require (an Eulerian kernel moves its reference inside) -> a
-    v += dt/2 a;  constrained v;  the step's works              (ledger)
-    the next step's size, and a reference update if one is due (stability, topology)
+    v += dt/2 a;  constrained v;  the step's works            (ledger)
+    the next step's size; a reference update if one is due    (stability, topology)
 The state lives in the bodies and point sets (parsph.state); sums over particles are exact
 (exact_sum), so that the history, like the particle state, is the same bit for bit on any
 number of ranks.
