@@ -643,22 +643,9 @@ def upgrade(scene: dict) -> None:
 
 
 def _formulation(path: str, raw: Any, dim: int) -> dict:
-    """A resolved formulation table: defaults by type, update triggers checked."""
+    """A resolved formulation table: its type's defaults and rules (formulations.FORMULATIONS)."""
     form = _table(path, raw, SECTIONS["formulation"], dim)
-    FORMULATIONS[form["type"]].resolve(path, form)  # the type's defaults and rules
-    if form["plastic_hourglass"] == "viscous" and not (form["hourglass"] > 0 and form["hourglass_form"] == "paper"):
-        raise InputError(f"{path}.plastic_hourglass = 'viscous' (LAMMPS MACHDYN's) needs the paper's hourglass "
-                         f"force: {path}.hourglass > 0 and {path}.hourglass_form = 'paper'")
-    if form["kernel"] == "eulerian" and form["hourglass"] > 0:
-        raise InputError(f"{path}.hourglass applies to a Lagrangian kernel: with kernel = 'eulerian' the reference "
-                         "is the current configuration, where F explains every separation (give 0 or leave it out)")
-    for key in ("search_every", "skin"):
-        if form[key] is not None and not _kept_lists(form):
-            raise InputError(f"{path}.{key} applies to kernel = 'eulerian' and type = 'ulsph'")
-        if form[key] is None:  # absent: as in scenes written before the key existed
-            del form[key]
-    if form["kernel"] != "eulerian":  # absent: as in scenes written before the key existed
-        del form["kernel"]
+    FORMULATIONS[form["type"]].resolve(path, form)
     return form
 
 

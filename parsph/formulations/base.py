@@ -18,6 +18,8 @@ import tempfile
 from dataclasses import dataclass
 from typing import Callable
 
+from parsph.errors import InputError
+
 
 class CompiledOnce:
     """A compiled stage kernel whose first call in a process (where Numba compiles it, or
@@ -68,3 +70,32 @@ class Stage:
     # a pass of the force row, which needs the state (F, stress) only: an Eulerian kernel
     # moves its reference to the current configuration before the first one
     force_row: bool = False
+
+
+def check_shared_keys(path: str, form: dict, kind: str, moves_reference: bool) -> None:
+    """The rules every formulation family applies to a formulation table of type `kind`
+    (InputError naming the key at `path`), after its own defaults: the update triggers
+    are ulsph's, the force form corrected SPH's, Hessian stabilisation [V]'s; MACHDYN's
+    viscous hourglass force needs the paper's hourglass force, hourglass control a
+    Lagrangian kernel; search_every and skin apply where the reference moves (they and the
+    kernel are dropped when not given, as in scenes written before the keys existed)."""
+    if kind != "ulsph" and (form["update_every"] or form["update_strain"]):
+        raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
+    if kind not in ("tlsph", "ulsph") and form["force_form"] != "pair":
+        raise InputError(f"{path}.force_form applies to tlsph and ulsph; {kind} has its own force row")
+    if kind not in ("tlsph", "ulsph") and form["hessian"] > 0:
+        raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
+                         f"not to {kind}")
+    if form["plastic_hourglass"] == "viscous" and not (form["hourglass"] > 0 and form["hourglass_form"] == "paper"):
+        raise InputError(f"{path}.plastic_hourglass = 'viscous' (LAMMPS MACHDYN's) needs the paper's hourglass "
+                         f"force: {path}.hourglass > 0 and {path}.hourglass_form = 'paper'")
+    if form["kernel"] == "eulerian" and form["hourglass"] > 0:
+        raise InputError(f"{path}.hourglass applies to a Lagrangian kernel: with kernel = 'eulerian' the reference "
+                         "is the current configuration, where F explains every separation (give 0 or leave it out)")
+    for key in ("search_every", "skin"):
+        if form[key] is not None and not moves_reference:
+            raise InputError(f"{path}.{key} applies to kernel = 'eulerian' and type = 'ulsph'")
+        if form[key] is None:
+            del form[key]
+    if form["kernel"] != "eulerian":
+        del form["kernel"]

@@ -42,7 +42,7 @@ from numba import njit
 from parsph import COMPILED_SOURCE, stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
-from parsph.formulations.base import CompiledOnce, Stage
+from parsph.formulations.base import CompiledOnce, Stage, check_shared_keys
 from parsph.formulations.nodal import EULERIAN
 from parsph.formulations.reference import PairOptions
 from parsph.formulations import tlsph
@@ -165,10 +165,6 @@ class GalerkinFormulation:
         kind = form["type"]
         if form["hourglass"] is None:
             form["hourglass"] = 0.0
-        if form["update_every"] or form["update_strain"]:
-            raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
-        if form["force_form"] != "pair":
-            raise InputError(f"{path}.force_form applies to tlsph and ulsph; {kind} has its own force row")
         if form["viscosity"] > 0 or form["viscosity_beta"] > 0:
             raise InputError(f"{path}.viscosity applies to tlsph, ulsph, sph and rlm, not to {kind}")
         if form["hourglass"] > 0:
@@ -182,9 +178,7 @@ class GalerkinFormulation:
             form["integration"] = form["integration"] or "nodal"
         else:  # absent, as in scenes written before the key existed (checkpoints compare scenes)
             del form["integration"]
-        if form["hessian"] > 0:
-            raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
-                             f"not to {kind}")
+        check_shared_keys(path, form, kind, GalerkinFormulation.moves_reference(form))
 
     @staticmethod
     def moves_reference(form: dict) -> bool:

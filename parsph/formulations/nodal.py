@@ -29,7 +29,7 @@ from parsph import stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations import tlsph
-from parsph.formulations.base import Stage
+from parsph.formulations.base import Stage, check_shared_keys
 from parsph.formulations.reference import PairOptions
 from parsph.kernels.functions import KERNEL_NAMES
 from parsph.materials import damage, update
@@ -65,18 +65,12 @@ class NodalFormulation:
         if kind == "ulsph" and not (form["update_every"] or form["update_strain"]):
             raise InputError(f"{path}.type = 'ulsph' needs an update trigger: {path}.update_every "
                              f"(steps) or {path}.update_strain (log strain)")
-        if kind != "ulsph" and (form["update_every"] or form["update_strain"]):
-            raise InputError(f"{path}.update_every/update_strain apply to {path}.type = 'ulsph' only")
-        if kind in ("sph", "rlm") and form["force_form"] != "pair":
-            raise InputError(f"{path}.force_form applies to tlsph and ulsph; {kind} has its own force row")
         if form["kernel"] == "eulerian" and kind not in ("sph", "rlm"):
             raise InputError(EULERIAN.format(path=path))
         if form["integration"] is not None:
             raise InputError(f"{path}.integration applies to type = 'efg'")
         del form["integration"]  # absent, as in scenes written before the key existed (checkpoints compare scenes)
-        if kind in ("sph", "rlm") and form["hessian"] > 0:
-            raise InputError(f"{path}.hessian (Hessian's-difference stabilisation [V]) applies to tlsph and ulsph, "
-                             f"not to {kind}")
+        check_shared_keys(path, form, kind, NodalFormulation.moves_reference(form))
 
     @staticmethod
     def check_body(body: dict, where: str, scene: dict) -> None:
