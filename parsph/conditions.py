@@ -22,6 +22,7 @@ def prescribe_velocity(sim, t: float) -> None:
     for body in sim.rigid_bodies:
         body.project(sim.mass, sim.X[:n] + sim.u[:n], sim.v)
 
+
 def prescribe_displacement(sim, t: float) -> None:
     """The constrained displacements at t (collocated on EFG bodies)."""
     sim.bcs.set_displacement(sim.u[: sim.n_owned], t)
@@ -39,6 +40,7 @@ def external_force(sim) -> np.ndarray:
         sim.tractions.add(ext, sim.t)
     ext[sim.bcs.mask] -= sim.force[sim.bcs.mask]
     return ext
+
 
 def reaction(sim) -> np.ndarray:
     """Force the constraints exert on each owned particle (zero where unconstrained)."""

@@ -170,6 +170,7 @@ def adopt(sim, local: LocalBody) -> None:
         if b.rigid:
             sim.F[b.lo:b.hi] = np.eye(dim)
 
+
 def adopt_set(sim, name: str, local: LocalBody) -> PointSet:
     """Another point set (stress points, Gauss points: formulations.galerkin): owned
     points, then ghosts (within the kernel support of an owned particle), the fields it
@@ -187,13 +188,13 @@ def adopt_set(sim, name: str, local: LocalBody) -> PointSet:
         b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
     return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, sim.comm), carried, arrays)
 
+
 def with_trials(arrays: dict, points: str) -> dict:
     """`arrays` with a work array NAME_trial beside each material state field NAME: the
     state the last stress evaluation computed (materials.update), committed at the start
     of the next step."""
     states = [name for name in arrays if fields.get(name, points).kind == "state"]
     return dict(arrays, **{name + "_trial": arrays[name].copy() for name in states})
-
 
 
 def initial(sim, name: str, fl: dict, keep: int, points: str = "particles") -> np.ndarray:
