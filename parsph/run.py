@@ -5,8 +5,6 @@ wall-clock limit."""
 from __future__ import annotations
 
 import glob
-import json
-import math
 import os
 import shlex
 import signal
@@ -15,36 +13,16 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from parsph import config, quantities
-from parsph.diagnostics import RowReduction, check_finite, check_particle_ids, history_row
+from parsph import config
 from parsph.errors import InputError, ParsphError
 from parsph.io import checkpoint, output_dir
-from parsph.io.history import HistoryWriter, read_reached
-from parsph.io.snapshots import SnapshotWriter, check_snapshots_readable
+from parsph.io.history import read_reached
+from parsph.io.outputs import Outputs
+from parsph.io.snapshots import check_snapshots_readable
 from parsph.parallel.runtime import COMM, collective, say
 from parsph.progress import Progress, format_duration
 
 REASONABLE_SECONDS = 30 * 86400.0  # a run expected to take longer than this gets a warning
-
-
-class Schedule:
-    """Fires every `interval` of simulated time, or every `every` steps if interval is 0."""
-
-    def __init__(self, interval: float, every: int, next_time: float | None = None):
-        self.interval, self.every = interval, every
-        self.next = interval if next_time is None else next_time
-
-    def due(self, t: float, step: int) -> bool:
-        if self.interval > 0:
-            if t >= self.next * (1 - 1e-12):
-                behind = (t * (1 + 1e-12) - self.next) / self.interval
-                if behind > 16:  # an interval far below the step: skip ahead at once
-                    self.next += math.floor(behind) * self.interval
-                while self.next <= t * (1 + 1e-12):
-                    self.next += self.interval
-                return True
-            return False
-        return self.every > 0 and step % self.every == 0
 
 
 class StopRequest:
@@ -192,64 +170,11 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 
-    out = scene["output"]
-    resume = None if data is None else sim.step_count
-    nexts = {} if data is None else data["schedules"]
-    units = {p["name"]: quantities.units(p["quantity"]) for p in scene["probes"]}
-    history = None
-    output_dir.ensure_space(out_dir, 3 * len(scene_json), "the run's first output")
-    with collective():
-        if COMM.rank == 0:
-            with open(os.path.join(out_dir, "scene.json"), "w") as fh:
-                json.dump(scene, fh, indent=2, sort_keys=True)
-            history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units, resume)
-    snapshots = SnapshotWriter(out_dir, scene_json, COMM, resume)
-    history_due = Schedule(out["history_interval"], out["history_every"], nexts.get("history"))
-    snapshot_due = Schedule(out["snapshot_interval"], 0, nexts.get("snapshot"))
-    checkpoint_due = Schedule(out["checkpoint_interval"], out["checkpoint_every"], nexts.get("checkpoint"))
+    outputs = Outputs(sim, scene, scene_json, out_dir, data, debug)
     end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
-    progress = Progress(end, max_steps, count, out["progress_seconds"], enabled=COMM.rank == 0 and not quiet)
+    progress = Progress(end, max_steps, count, scene["output"]["progress_seconds"],
+                        enabled=COMM.rank == 0 and not quiet)
     stop = StopRequest(scene["time"]["wall_limit"])
-
-    def record() -> int:
-        """Collective: the history row of the present state, kept in memory; the rows are
-        written when rank 0 finds a write due (one reduction over the ranks carries its
-        answer with the row's sums)."""
-        start = time.perf_counter()
-        if debug:
-            check_particle_ids(sim)
-        reduction = RowReduction(COMM)
-        due = reduction.add_max([history is not None and history.write_due()])
-        values = history_row(sim, reduction)
-        check_finite(values, sim)
-        if history is not None:
-            history.append(values)
-        if reduction.maxima[due]:
-            write_history()
-        sim.stage_seconds["diagnostics+history"] += time.perf_counter() - start
-        return sim.step_count
-
-    def snapshot() -> None:
-        output_dir.ensure_space(out_dir, snapshots.estimate_bytes(sim, out["snapshot_fields"]),
-                                f"the snapshot at step {sim.step_count}")
-        snapshots.write(sim, out["snapshot_fields"])
-
-    def write_history() -> None:
-        """Collective: the history rows in memory to the file (a restart from the next
-        checkpoint finds every row up to it), if the disk has room for them."""
-        with collective():
-            if history is not None:
-                output_dir.check_space(out_dir, history.pending_bytes(),
-                                       f"the history rows up to step {sim.step_count}")
-                history.write()
-
-    def save_checkpoint():
-        write_history()
-        schedules = {"history": history_due.next, "snapshot": snapshot_due.next,
-                     "checkpoint": checkpoint_due.next}
-        return checkpoint.write_checkpoint(out_dir, sim, schedules, scene, out["checkpoint_keep"])
-
-    last = -1 if data is None else sim.step_count
     sim.stage_seconds.clear()  # the set-up's force evaluation (and compilation) is not a step
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count
@@ -261,9 +186,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
         profiler = Profile()
     try:
         if data is None:
-            last = record()
-            if out["snapshot_interval"] > 0:
-                snapshot()
+            outputs.start()
         while sim.t < end and not (max_steps and sim.step_count >= max_steps):
             if profiler is not None and not profiler.step and (
                     sim.t >= 0.5 * end or (max_steps and sim.step_count >= max_steps // 2)):  # half-way
@@ -273,35 +196,20 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
             progress.update(sim.step_count, sim.t, dt)
             if sim.step_count - steps_at_start == 10:
                 warn_if_endless(sim, end, max_steps, time.perf_counter() - loop_start, 10)
-            if history_due.due(sim.t, sim.step_count):
-                last = record()
-            output_start = time.perf_counter()
-            if snapshot_due.due(sim.t, sim.step_count):
-                snapshot()
             stopped = stop.check() if sim.step_count % 10 == 0 else 0
-            if checkpoint_due.due(sim.t, sim.step_count) or stopped:
-                path = save_checkpoint()
-            sim.stage_seconds["snapshots+checkpoints"] += time.perf_counter() - output_start
+            path = outputs.after_step(stopped)
             if stopped:
                 break
-        # the end state is always in the history and in the snapshots (a stopped run's is
-        # written when it is continued to its end)
-        if not stopped:
-            if last != sim.step_count:
-                last = record()
-            if not snapshots.times or snapshots.times[-1] != sim.t:
-                snapshot()
-        write_history()
+        outputs.finish(stopped)
     except output_dir.OutputFull as exc:
         error = ParsphError(f"{exc}; stopped at step {sim.step_count}, t = {sim.t:.6g} s. "
-                            f"{_checkpoint_after_full(save_checkpoint, out_dir, scene_path, overrides)}")
+                            f"{_checkpoint_after_full(outputs.save_checkpoint, out_dir, scene_path, overrides)}")
         error.agreed = True  # every rank met the same (collective) condition and wrote the same
         raise error from None
     finally:
         stop.restore()
         progress.close()
-        if history is not None:
-            history.close()
+        outputs.close()
     loop_seconds = time.perf_counter() - loop_start
     steps = sim.step_count - steps_at_start
     if steps:

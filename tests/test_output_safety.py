@@ -303,7 +303,7 @@ def test_two_ranks_refuse_a_directory_in_use(bar, tmp_path):
 
 @pytest.mark.timeout(CEILING)
 def test_an_output_interval_far_below_the_step_fires_every_step_at_once():
-    from parsph.run import Schedule
+    from parsph.io.outputs import Schedule
 
     every = Schedule(interval=1e-12, every=0)
     for step, t in enumerate((1.5e-7, 3.0e-7, 4.5e-3), start=1):
