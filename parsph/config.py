@@ -24,7 +24,7 @@ from typing import Any
 from parsph import expressions, quantities
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, in_range, non_negative, one_of, positive
-from parsph.formulations import FORMULATIONS
+from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
 from parsph.materials import FAILURE_KEYS, LAW_KEYS, LAWS, check_failure, constants, failure_of
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
@@ -73,53 +73,9 @@ SECTIONS: dict[str, dict[str, Key]] = {
                            "total-Lagrangian kernels, no symmetry planes"),
     },
     "formulation": {
-        "type": Key("str", "tlsph", one_of(*FORMULATIONS),
-                    "tlsph: corrected SPH, total-Lagrangian [G]; ulsph: the same from an updated "
-                    "reference [V §3.1]; sph: symmetrised SPH; rlm: Randles-Libersky normalisation "
-                    "[R Table 1] (Lagrangian kernel, nodal integration); kbm: Krongauz-Belytschko "
-                    "corrected gradients with stress points [R §5.2] (a box); efg: element-free "
-                    "Galerkin, MLS with a linear basis [R §4.4]"),
-        "integration": Key("str", None, one_of("nodal", "cells"),
-                           "efg: at the particles (nodal) or at the Gauss points of background cells "
-                           "[R §5.3] (cells: a box)"),
-        "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
-        "hessian_correction": Key("str", "weighted", one_of("weighted", "paper"),
-                                  "linear correction of the kernel Hessian: weighted: the A term "
-                                  "weighted by the kernel (continuous as neighbours enter the "
-                                  "support); paper: unweighted [V eq. 19]"),
-        "update_every": Key("int", 0, non_negative, "ulsph: update the reference every N steps (0 = off)"),
-        "update_strain": Key("float", 0.0, non_negative,
-                             "ulsph: update when the largest principal log strain since the reference "
-                             "exceeds this (0 = off)"),
-        "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
-        "hourglass": Key("float", None, non_negative,
-                         "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
-                         "0 for sph, rlm and kbm (the methods as [R] compares them)"),
-        "kernel": Key("str", None, one_of("lagrangian", "eulerian"),
-                      "sph, rlm, kbm, efg (nodal): the kernel and neighbours in the reference configuration "
-                      "(lagrangian, the default) or in the current one, rebuilt at every step (eulerian) "
-                      "[R eq. 16-17, Table 2]"),
-        "search_every": Key("int", None, positive,
-                            "eulerian, ulsph: find neighbours, rebalance and exchange ghosts at most every "
-                            "N reference updates (default 30, as [R §9.3]; an Eulerian kernel updates at "
-                            "every step), sooner when a particle has moved half the skin; the corrections "
-                            "and shape functions are recomputed at every update (kbm, efg: their point "
-                            "relations too, from this rank's points); the result is that of a search at "
-                            "every update"),
-        "skin": Key("float", None, in_range(0.0, 2.0),
-                    "eulerian, ulsph: how far beyond the support neighbours are kept between searches, "
-                    "as a fraction of the support (default 0.25; at most 2: the lists hold (1 + skin)^d "
-                    "times the pairs)"),
-        "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
-                              "paper: [G eq. 32]; variational: forces from the penalty energy"),
-        "viscosity": Key("float", 0.0, non_negative,
-                         "Monaghan's artificial viscosity alpha (0: none; for fluids; particle formulations)"),
-        "viscosity_beta": Key("float", 0.0, non_negative, "Monaghan's artificial viscosity beta"),
-        "plastic_hourglass": Key("str", "yield_stress", one_of("yield_stress", "elastic", "viscous"),
-                                 "j2_plasticity, the hourglass force of a yielded particle: its yield stress "
-                                 "as modulus [G §4.5] (yield_stress), E throughout (elastic), or LAMMPS "
-                                 "MACHDYN's viscous force for a pair with a plastic strain above 1e-3 "
-                                 "(viscous; hourglass_form = 'paper')"),
+        "type": Key("str", "tlsph", one_of(*FORMULATIONS), "; ".join(
+            f"{name}: {doc}" for family in FAMILIES for name, doc in family.TYPES.items())),
+        **FORMULATION_KEYS,  # the formulation families' (formulations.FORMULATIONS)
     },
     "time": {
         "end": Key("float", REQUIRED, positive, "end time [s]"),

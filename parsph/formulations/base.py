@@ -19,6 +19,26 @@ from dataclasses import dataclass
 from typing import Callable
 
 from parsph.errors import InputError
+from parsph.keys import Key, in_range, one_of, positive
+
+# the formulation keys of the reference every family reads
+KEYS = {
+    "kernel": Key("str", None, one_of("lagrangian", "eulerian"),
+                  "sph, rlm, kbm, efg (nodal): the kernel and neighbours in the reference configuration "
+                  "(lagrangian, the default) or in the current one, rebuilt at every step (eulerian) "
+                  "[R eq. 16-17, Table 2]"),
+    "search_every": Key("int", None, positive,
+                        "eulerian, ulsph: find neighbours, rebalance and exchange ghosts at most every "
+                        "N reference updates (default 30, as [R §9.3]; an Eulerian kernel updates at "
+                        "every step), sooner when a particle has moved half the skin; the corrections "
+                        "and shape functions are recomputed at every update (kbm, efg: their point "
+                        "relations too, from this rank's points); the result is that of a search at "
+                        "every update"),
+    "skin": Key("float", None, in_range(0.0, 2.0),
+                "eulerian, ulsph: how far beyond the support neighbours are kept between searches, "
+                "as a fraction of the support (default 0.25; at most 2: the lists hold (1 + skin)^d "
+                "times the pairs)"),
+}
 
 
 class CompiledOnce:

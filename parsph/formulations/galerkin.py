@@ -49,11 +49,11 @@ from parsph.formulations import tlsph
 from parsph.formulations.tlsph import gradient_row, stress_at
 from parsph.kernels import shape as kernel_shape
 from parsph.kernels.functions import KERNEL_NAMES
+from parsph.keys import Key, one_of
 from parsph.materials import update
 from parsph.relations import KeptRelation, Relation, find_relation
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
-TYPES = ("kbm", "efg")
 
 register(Field("weight", "scalar", owner="kbm", doc="quadrature weight among particles and stress points [m^3]"))
 for _set in (STRESS_POINTS, GAUSS_POINTS):
@@ -151,7 +151,15 @@ class GalerkinFormulation:
     """One body's Galerkin formulation: shape functions, integration points, compiled
     stages, strain energy."""
 
-    TYPES = TYPES  # formulation.type names it serves
+    TYPES = {  # formulation.type names it serves
+        "kbm": "Krongauz-Belytschko corrected gradients with stress points [R §5.2] (a box)",
+        "efg": "element-free Galerkin, MLS with a linear basis [R §4.4]",
+    }
+    KEYS = {  # its formulation keys
+        "integration": Key("str", None, one_of("nodal", "cells"),
+                           "efg: at the particles (nodal) or at the Gauss points of background cells "
+                           "[R §5.3] (cells: a box)"),
+    }
     damage = False  # tensile damage is computed at the particles of the particle formulations
     eta = 0.0  # what the loop asks of every formulation: no Hessian stabilisation,
     hourglass_form = 0  # no hourglass control, no strain trigger of reference updates

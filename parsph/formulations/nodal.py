@@ -32,9 +32,8 @@ from parsph.formulations import tlsph
 from parsph.formulations.base import Stage, check_shared_keys
 from parsph.formulations.reference import PairOptions
 from parsph.kernels.functions import KERNEL_NAMES
+from parsph.keys import Key, non_negative, one_of
 from parsph.materials import damage, update
-
-TYPES = ("tlsph", "ulsph", "sph", "rlm")
 
 # the updated reference [V §3.1], carried when a body updates its reference (ulsph, or an
 # Eulerian kernel)
@@ -52,7 +51,37 @@ EULERIAN = ("{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'k
 class NodalFormulation:
     """One body's formulation: its options and compiled stages."""
 
-    TYPES = ("tlsph", "ulsph", "sph", "rlm")  # formulation.type names it serves
+    TYPES = {  # formulation.type names it serves
+        "tlsph": "corrected SPH, total-Lagrangian [G]",
+        "ulsph": "the same from an updated reference [V §3.1]",
+        "sph": "symmetrised SPH",
+        "rlm": "Randles-Libersky normalisation [R Table 1] (Lagrangian kernel, nodal integration)",
+    }
+    KEYS = {  # its formulation keys (the other families refuse those that do not apply to them)
+        "hessian": Key("float", 0.0, non_negative, "Hessian's-difference stabilisation eta [V eq. 17]"),
+        "hessian_correction": Key("str", "weighted", one_of("weighted", "paper"),
+                                  "linear correction of the kernel Hessian: weighted: the A term "
+                                  "weighted by the kernel (continuous as neighbours enter the "
+                                  "support); paper: unweighted [V eq. 19]"),
+        "update_every": Key("int", 0, non_negative, "ulsph: update the reference every N steps (0 = off)"),
+        "update_strain": Key("float", 0.0, non_negative,
+                             "ulsph: update when the largest principal log strain since the reference "
+                             "exceeds this (0 = off)"),
+        "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
+        "hourglass": Key("float", None, non_negative,
+                         "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
+                         "0 for sph, rlm and kbm (the methods as [R] compares them)"),
+        "hourglass_form": Key("str", "variational", one_of("paper", "variational"),
+                              "paper: [G eq. 32]; variational: forces from the penalty energy"),
+        "viscosity": Key("float", 0.0, non_negative,
+                         "Monaghan's artificial viscosity alpha (0: none; for fluids; particle formulations)"),
+        "viscosity_beta": Key("float", 0.0, non_negative, "Monaghan's artificial viscosity beta"),
+        "plastic_hourglass": Key("str", "yield_stress", one_of("yield_stress", "elastic", "viscous"),
+                                 "j2_plasticity, the hourglass force of a yielded particle: its yield stress "
+                                 "as modulus [G §4.5] (yield_stress), E throughout (elastic), or LAMMPS "
+                                 "MACHDYN's viscous force for a pair with a plastic strain above 1e-3 "
+                                 "(viscous; hourglass_form = 'paper')"),
+    }
     damage = True  # tensile damage (materials.damage) at its particles
 
     @staticmethod
