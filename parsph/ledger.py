@@ -10,6 +10,7 @@ rule over each step's displacement, as the kick-drift-kick scheme moves the part
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -33,7 +34,7 @@ class Term:
     key: str
     column: str
     sign: float = 1.0
-    present: object = None
+    present: Callable | None = None
 
     def shown(self, sim) -> bool:
         return self.present is None or self.present(sim)
