@@ -23,7 +23,7 @@ from numba import njit
 
 from parsph import readouts
 from parsph.exact_sum import SCALE, Exact, totals
-from parsph.ledger import TERMS
+from parsph.balance import TERMS
 from parsph.rigid import moments
 
 

@@ -1,20 +1,16 @@
-"""The energy ledger: every term of the energy balance declared once (`TERMS`), the work
-accumulated step by step (running totals per body, exact: exact_sum) and what each rank
-sums for the history (diagnostics.global_parts).
-
-The balance: kinetic + strain + plastic + damage + viscous + hourglass + contact
-+ contact work - external work is constant. The works are integrated by the trapezoidal
-rule over each step's displacement, as the kick-drift-kick scheme moves the particles.
+"""The energy ledger: what each rank sums for every term of the energy balance
+(parsph.balance.TERMS) for the history (diagnostics.global_parts), and the work
+accumulated step by step (running totals per body, exact: exact_sum). The works are
+integrated by the trapezoidal rule over each step's displacement, as the kick-drift-kick
+scheme moves the particles.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
 from parsph import conditions
+from parsph.balance import TERMS
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.formulations import tlsph
 from parsph.materials import damage
@@ -24,32 +20,6 @@ RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
            "contact_work",  # absorbed by contact damping and friction
            "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
            "external_work")
-
-
-@dataclass(frozen=True)
-class Term:
-    """A term of the balance: its key in Ledger.items, its history column, its sign in the
-    total energy and whether the scene has it (a predicate of the simulation)."""
-
-    key: str
-    column: str
-    sign: float = 1.0
-    present: Callable | None = None
-
-    def shown(self, sim) -> bool:
-        return self.present is None or self.present(sim)
-
-
-TERMS = (
-    Term("strain", "strain_energy"),
-    Term("plastic", "plastic_work"),
-    Term("damage", "damage_work"),
-    Term("viscous", "viscous_work"),
-    Term("hourglass", "hourglass_energy"),
-    Term("external", "external_work", -1.0),
-    Term("contact", "contact_energy", present=lambda sim: sim.contact is not None),
-    Term("contact_work", "contact_work", present=lambda sim: sim.contact is not None and sim.contact.dissipative),
-)
 
 
 class Ledger:

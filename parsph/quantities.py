@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from parsph import fields
+from parsph.balance import TERMS
 
 
 @dataclass(frozen=True)
@@ -114,8 +115,7 @@ def bytes_per_point(name: str, dim: int) -> int:
 # name, by pattern, and NAME.BODY for a body's energies
 HISTORY = {
     "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
-    "strain_energy": "J", "plastic_work": "J", "damage_work": "J", "viscous_work": "J", "hourglass_energy": "J",
-    "external_work": "J", "total_energy": "J", "contact_energy": "J", "contact_work": "J", "contact_closest": "1",
+    **{term.column: "J" for term in TERMS}, "total_energy": "J", "contact_closest": "1",
     "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
 }
 HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),
