@@ -45,8 +45,12 @@ class PointSet:
         return {name: self.owned(name) for name in fields.checkpointed(self.carried, self.name) if name != "gid"}
 
     def refresh(self, *names: str) -> None:
-        """Copy the owners' values of the named arrays into the ghost (and mirror) rows."""
-        self.decomp.refresh(*(self.arrays[name] for name in names))
+        """Copy the owners' values of the named arrays into the ghost rows, and into the
+        mirror images' rows reflected, but a material state (NAME or NAME_trial) as it is:
+        its columns are not components of one vector or tensor."""
+        states = {name for name in names if fields.known(name.removesuffix("_trial"), self.name)
+                  and fields.get(name.removesuffix("_trial"), self.name).kind == "state"}
+        self.decomp.refresh(*(self.arrays[name] for name in names), copied=[name in states for name in names])
 
     def commit(self) -> None:
         """The material state of the last stress evaluation (the fields NAME_trial) becomes

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from mpi4py import MPI
 
@@ -78,3 +80,41 @@ hourglass_form = "{form}"
 end = 1.0
 {extra}
 """
+
+
+# the arrays a run never changes after its points are set up (or, for the updated
+# reference, changes only with a refresh of every field)
+CONSTANT = {"X", "measure", "volume", "mass", "support", "groups", "gid", "Xr", "Fr", "measure_r", "volume_r",
+            "weight", "body", "owner"}
+
+
+def poison_undeclared(sim) -> None:
+    """Wrap every stage of `sim`: the ghost rows of the changing arrays of every point set
+    that it neither declares to read nor writes ("NAME" of the particles, "SET.NAME" of
+    another set), nor share memory with those, are NaN while it runs. A stage that reads
+    one at neighbours without declaring it then spreads the NaN."""
+    changing = []
+    for points in sim.point_sets():
+        n = points.n_owned
+        prefix = "" if points.name == "particles" else points.name + "."
+        changing += [(prefix + k, a, n) for k, a in points.arrays.items() if k not in CONSTANT
+                     and isinstance(a, np.ndarray) and a.dtype.kind == "f" and len(a) > n]
+    arrays = {name: a for name, a, _ in changing}
+
+    def wrap(stage):
+        kept = [arrays[k] for k in stage.reads + stage.writes if k in arrays]
+        hidden = [(a, n) for k, a, n in changing if not any(np.shares_memory(a, b) for b in kept)]
+
+        def run():
+            saved = [a[n:].copy() for a, n in hidden]
+            for a, n in hidden:
+                a[n:] = np.nan
+            try:
+                stage.run()
+            finally:
+                for (a, n), value in zip(hidden, saved):
+                    a[n:] = value
+        return dataclasses.replace(stage, run=run)
+
+    for b in sim.bodies:
+        b.stages = [wrap(stage) for stage in b.stages]

@@ -297,13 +297,14 @@ class Decomposition:
         """Forget layer-2 ghosts once reference data is built."""
         self.local_gid = self.local_gid[: self.n_rows]
 
-    def refresh(self, *arrays: np.ndarray) -> None:
+    def refresh(self, *arrays: np.ndarray, copied=()) -> None:
         """Copy owners' values of `arrays` (indexed by local particle) into the ghost slots,
-        then the reflected values of the mirror images' sources into theirs."""
-        for arr in arrays:
+        then the reflected values of the mirror images' sources into theirs (copied as they
+        are where `copied` says so, per array)."""
+        for k, arr in enumerate(arrays):
             self._exchange(arr)
             if self.mirrors is not None:
-                self.mirrors.fill(arr)
+                self.mirrors.fill(arr, reflected=not (k < len(copied) and copied[k]))
 
     def refresh_all(self, *arrays: np.ndarray) -> None:
         """refresh, and the layer-2 ghosts too (a Decomposition made with layer2)."""

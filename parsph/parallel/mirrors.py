@@ -39,13 +39,14 @@ class Mirrors:
     source: np.ndarray  # local row of each layer-1 image's particle
     sign: np.ndarray  # (images, dim): the reflection, +1 or -1 per component
 
-    def fill(self, arr: np.ndarray) -> None:
+    def fill(self, arr: np.ndarray, reflected: bool = True) -> None:
         """Set the layer-1 image rows of `arr` (scalars, vectors or tensors per particle)
-        to their sources' values, reflected."""
+        to their sources' values, reflected (or, not `reflected`, as they are)."""
         if not len(self.source):
             return
         value = arr[self.source]
-        arr[self.start: self.start + len(self.source)] = value if arr.ndim == 1 else reflect(value, self.sign)
+        arr[self.start: self.start + len(self.source)] = \
+            value if arr.ndim == 1 or not reflected else reflect(value, self.sign)
 
 
 def reflect(value: np.ndarray, sign: np.ndarray) -> np.ndarray:
