@@ -91,8 +91,9 @@ CONSTANT = {"X", "measure", "volume", "mass", "support", "groups", "gid", "Xr", 
 def poison_undeclared(sim) -> None:
     """Wrap every stage of `sim`: the ghost rows of the changing arrays of every point set
     that it neither declares to read nor writes ("NAME" of the particles, "SET.NAME" of
-    another set), nor share memory with those, are NaN while it runs. A stage that reads
-    one at neighbours without declaring it then spreads the NaN."""
+    another set), nor share memory with those, hold other values (1.5 x + 1) while it runs:
+    a stage that reads one at neighbours without declaring it computes other forces. (NaN
+    would hide in the kernels' comparisons, which are false for it.)"""
     changing = []
     for points in sim.point_sets():
         n = points.n_owned
@@ -108,7 +109,7 @@ def poison_undeclared(sim) -> None:
         def run():
             saved = [a[n:].copy() for a, n in hidden]
             for a, n in hidden:
-                a[n:] = np.nan
+                a[n:] = 1.5 * a[n:] + 1.0
             try:
                 stage.run()
             finally:

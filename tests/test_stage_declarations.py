@@ -1,6 +1,6 @@
 """The stages' declarations against their code: each stage declares the fields it reads at
 neighbours (formulations.base.Stage.reads), and the loop refreshes only those. Here every
-other field that changes in a run has its ghost rows set to NaN while the stage runs
+other field that changes in a run has other values in its ghost rows while the stage runs
 (physics.poison_undeclared): a stage that reads one of them at neighbours without
 declaring it changes the forces, which must stay the same bit for bit. On one rank the
 ghost rows are the mirror images of the symmetric punch; on two, the cantilever's halo
@@ -36,7 +36,7 @@ J2_PUNCH = (RUNS / "punch.toml").read_text().replace(
 ], ids=["tlsph", "paper", "ulsph", "viscosity", "j2", "machdyn", "jc_failure", "damage"])
 def test_no_stage_reads_an_undeclared_field_at_neighbours(scene, overrides):
     sim = simulation(scene, ["parameters.spacing=1e-3", *overrides])
-    assert sim.particles.decomp.n_rows > sim.n_owned  # mirror images: ghost rows to poison
+    assert sim.particles.decomp.n_rows > sim.n_owned  # mirror images: ghost rows to change
     for _ in range(40):  # deformed under the punch, some particles yielded
         sim.step()
     if "j2" in scene:
