@@ -111,7 +111,7 @@ def bytes_per_point(name: str, dim: int) -> int:
     return {"rank": 4, "point": 24, "tensor": 8 * dim * dim, "vector": 8 * dim}.get(kind, 8)
 
 
-# The history's series (diagnostics.global_diagnostics, Simulation.diagnostics): units by
+# The history's series (diagnostics.history_row, the energies of balance.TERMS): units by
 # name, by pattern, and NAME.BODY for a body's energies
 HISTORY = {
     "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
