@@ -25,7 +25,7 @@ class Failure:
         self.breaking = any(b.breaks_pairs for b in bodies)  # some body's failed particles lose their pairs
         self.detached = None  # per local row: failed and without pairs (None if no body breaks pairs)
 
-    def grow(self, sim, dt: float) -> None:
+    def advance(self, sim, dt: float) -> None:
         """Each body's failure model advances from the committed state over the coming step dt
         (materials.FAILURES: tensile damage grows, a Johnson-Cook index of 1 fails its point)."""
         for b in self.bodies:

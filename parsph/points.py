@@ -26,6 +26,8 @@ class PointSet:
         self.decomp = decomp
         self.carried = carried
         self.arrays = dict(arrays, gid=gid)
+        # its material states: committed as NAME, the last evaluation's as NAME_trial
+        self.states = [name for name in carried if fields.get(name, self.name).kind == "state"]
 
     @property
     def total(self) -> int:
@@ -48,13 +50,11 @@ class PointSet:
         """Copy the owners' values of the named arrays into the ghost rows, and into the
         mirror images' rows reflected, but a material state (NAME or NAME_trial) as it is:
         its columns are not components of one vector or tensor."""
-        states = {name for name in names if fields.known(name.removesuffix("_trial"), self.name)
-                  and fields.get(name.removesuffix("_trial"), self.name).kind == "state"}
-        self.decomp.refresh(*(self.arrays[name] for name in names), copied=[name in states for name in names])
+        self.decomp.refresh(*(self.arrays[name] for name in names),
+                            copied=[name.removesuffix("_trial") in self.states for name in names])
 
     def commit(self) -> None:
         """The material state of the last stress evaluation (the fields NAME_trial) becomes
         the committed state of the owned points."""
-        for name in self.carried:
-            if fields.get(name, self.name).kind == "state":
-                self.owned(name)[:] = self.owned(name + "_trial")
+        for name in self.states:
+            self.owned(name)[:] = self.owned(name + "_trial")

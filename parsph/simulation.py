@@ -191,7 +191,7 @@ class Simulation:
             dt, t_new = t_end - self.t, t_end
         for points in self.point_sets():  # the last evaluation's state is committed
             points.commit()
-        self.failure.grow(self, dt)
+        self.failure.advance(self, dt)
         if self.failure.breaking:
             self.failure.break_pairs(self)
         if self.contact is not None and self.contact.dissipative:  # friction's limit

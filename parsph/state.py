@@ -38,7 +38,8 @@ class Body:
         self.first, self.last = first, last
         self.law = materials.LAWS[spec["material"]["model"]]
         self.constants = materials.constants(spec["material"])
-        self.failure = materials.failure_model(spec["material"])  # 0: none (materials.damage, johnson_cook_failure)
+        failure = materials.failure_of(spec["material"])  # materials.FAILURES: damage, johnson_cook_failure
+        self.failure = failure.failure_id if failure else 0  # 0: none
         self.failure_strain = spec["material"]["failure_strain"]  # tensile damage's
         self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
         self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs

@@ -17,7 +17,7 @@ from parsph.materials import damage, elastic, elastoplastic, johnson_cook, johns
 from parsph.materials.law import Constants, Law
 
 __all__ = ["FAILURES", "FAILURE_KEYS", "LAWS", "LAW_KEYS", "Constants", "Law", "check_failure", "constants",
-           "failure_model", "failure_of"]
+           "failure_of"]
 
 LAWS = {law.name: law for law in (
     *elastic.LAWS,
@@ -40,12 +40,6 @@ register(Field("damage", "state", owner="damage", columns=damage.COLUMNS,
 def failure_of(material: dict):
     """A resolved material's failure model (FAILURES: the one whose key is given), or None."""
     return next((model for model in FAILURES.values() if material.get(model.key) is not None), None)
-
-
-def failure_model(material: dict) -> int:
-    """The id of a resolved material's failure model, or 0."""
-    model = failure_of(material)
-    return model.failure_id if model else 0
 
 
 def check_failure(path: str, material: dict) -> None:
