@@ -1,7 +1,7 @@
 """The terms of the energy balance, declared once: each term's key (what the ledger sums
 for it: parsph.ledger), its history column (J), its sign in the total energy and whether a
 scene has it. The balance: kinetic + strain + plastic + damage + viscous + hourglass +
-contact + contact work - external work is constant.
+contact + contact work + damping work - external work is constant.
 """
 
 from __future__ import annotations
@@ -33,4 +33,5 @@ TERMS = (
     Term("external", "external_work", -1.0),
     Term("contact", "contact_energy", present=lambda sim: sim.contact is not None),
     Term("contact_work", "contact_work", present=lambda sim: sim.contact is not None and sim.contact.dissipative),
+    Term("damping", "damping_work", present=lambda sim: sim.damping > 0),
 )

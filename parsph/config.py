@@ -83,11 +83,23 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "cfl": Key("float", 0.6, in_range(0.0, 1.0, True), "safety factor of the CFL time step"),
         "damping": Key("float", 0.0, non_negative, "mass-proportional damping rate [1/s]"),
         "max_steps": Key("int", 0, non_negative, "stop after this many steps (0 = no limit)"),
-        "step_floor": Key("float", 0.0, in_range(0.0, 1.0, False, True),
-                          "stop with an error naming the particle when the stable step falls below this "
-                          "fraction of the run's first one (0 = never)"),
+        "step_floor": Key("float", 1e-6, in_range(0.0, 1.0, False, True),
+                          "stop with an error naming the particle (and the bodies, in contact) when the stable "
+                          "step falls below this fraction of the run's first one: the step has collapsed "
+                          "(0 = never)"),
         "wall_limit": Key("float", 0.0, non_negative,
                           "wall-clock seconds after which the run checkpoints and stops (0 = none)"),
+    },
+    "balance": {
+        "energy": Key("float", None, non_negative,
+                      "warn when the total energy drifts by more than this fraction of the largest energy "
+                      "the run has held (0 = no check; default 0.05, and no check for a scene with a body in "
+                      "kbm or rlm, whose forces are not the gradient of their energy)"),
+        "momentum": Key("float", 1e-3, non_negative,
+                        "warn when the forces between particles change the momentum by more than this "
+                        "fraction of sqrt(2 M E) (M the mass, E the largest energy), or the angular momentum "
+                        "by more than it times the radius of gyration (0 = no check)"),
+        "strict": Key("bool", False, None, "stop the run (exit 1, after a checkpoint) instead of warning"),
     },
     "parallel": {
         "rebalance": Key("float", 0.0, non_negative,

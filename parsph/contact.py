@@ -55,10 +55,13 @@ from mpi4py import MPI
 from numba import njit
 
 from parsph.cells import close_pairs
+from parsph.errors import InputError, ParsphError
 from parsph.neighbors import pair_keys
 from parsph.relations import Skin
 
 SKIN = 0.5  # of the largest contact distance
+INSIDE = 0.25  # two particles of two bodies closer than this fraction of their contact distance:
+#                one is inside the other (the contact has failed)
 
 
 def contact_modulus(c, dim: int) -> float:
@@ -126,10 +129,13 @@ class Contact:
         self.self_contact = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
         self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
 
-    def evaluate(self, x: np.ndarray, v: np.ndarray) -> None:
+    def evaluate(self, x: np.ndarray, v: np.ndarray, step_limit: np.ndarray) -> None:
         """The contact forces, energies and spring bounds at the owned particles' current
         positions x and velocities v (n, dim) (collective: ghost positions and, with
-        dissipation, velocities; the lists when due)."""
+        dissipation, velocities; the lists when due). `step_limit` (owned particles) is
+        lowered to the step in which a particle in contact moves a quarter of the skin, so
+        that the lists see every contact coming (a pair closes in by at most half the skin
+        between searches), whatever the speed."""
         if self.rule.due(x, self.mine):
             self.search(x)
         else:
@@ -142,6 +148,68 @@ class Contact:
                    self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt, self.dim,
                    self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2, self.entry_force,
                    self.closest)
+        mine = self.mine
+        speed = np.sqrt(np.einsum("na,na->n", v[mine], v[mine]))
+        moving = speed > 0.0
+        step_limit[mine[moving]] = np.minimum(step_limit[mine[moving]], 0.25 * self.skin / speed[moving])
+
+    def check_inside(self, gid: np.ndarray, body: np.ndarray, names: list, step: int, t: float) -> None:
+        """Raise (every rank alike) the error naming both bodies if a particle of one has come
+        within INSIDE of the contact distance of a particle of another: it is inside that body,
+        which contact exists to prevent (collective)."""
+        mine = self.closest[self.mine]
+        lowest = float(mine.min()) if len(mine) else 1.0
+        if self.comm.size > 1:
+            lowest = self.comm.allreduce(lowest, op=MPI.MIN)
+        if lowest >= INSIDE:
+            return
+        found = []
+        if len(mine) and mine.min() == lowest:
+            i = int(self.mine[np.argmin(mine)])
+            found = [(int(gid[i]), int(body[i]), self.partner(i))]
+        first, first_body, (other, other_body, ratio) = min(c for part in self.comm.allgather(found) for c in part)
+        error = ParsphError(
+            f"bodies '{names[first_body]}' and '{names[other_body]}' are passing through each other at step {step}, "
+            f"t = {t:.6g} s: particle {first} of '{names[first_body]}' is at {ratio:.3g} of the contact distance from "
+            f"particle {other} of '{names[other_body]}', inside it; the contact springs cannot stop the bodies at "
+            f"this speed (their energy exceeds what the springs store over the contact distance): raise "
+            f"contact.stiffness or slow the impact")
+        error.agreed = True  # the same reduction on every rank
+        raise error
+
+    def check_apart(self, gid: np.ndarray, body: np.ndarray, x: np.ndarray, names: list) -> None:
+        """At the start: refuse bodies in contact that overlap (two particles closer than 0.99
+        of their contact distance), naming both and the closest pair (collective)."""
+        mine = self.closest[self.mine]
+        lowest = float(mine.min()) if len(mine) else 1.0
+        if self.comm.size > 1:
+            lowest = self.comm.allreduce(lowest, op=MPI.MIN)
+        if lowest >= 0.99:
+            return
+        found = []
+        if len(mine) and mine.min() == lowest:
+            i = int(self.mine[np.argmin(mine)])
+            found = [(int(gid[i]), int(body[i]), tuple(x[i].tolist()), self.partner(i))]
+        first, first_body, at, (other, other_body, ratio) = min(c for part in self.comm.allgather(found) for c in part)
+        where = ", ".join(f"{c:.6g}" for c in at)
+        error = InputError(
+            f"bodies '{names[first_body]}' and '{names[other_body]}' overlap at the start: particle {first} of "
+            f"'{names[first_body]}' at ({where}) is at {ratio:.3g} of the contact distance from particle {other} of "
+            f"'{names[other_body]}' (the contact distance is contact.radius times the spacing); move the bodies "
+            f"apart by at least {(1.0 - ratio) * 100:.3g} % of it, or lower contact.radius")
+        error.agreed = True
+        raise error
+
+    def partner(self, i: int) -> tuple | None:
+        """(global id, body, distance over the contact distance) of owned particle i's closest
+        candidate in contact, or None if it touches nothing."""
+        if self.closest[i] >= 1.0:
+            return None
+        row = self.idx[self.ptr[i]:self.ptr[i + 1]]
+        sep = self.x[row] - self.x[i]
+        ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (self.radius_all[row] + self.radius_all[i])
+        k = int(np.argmin(ratio))
+        return int(self.gid_all[row[k]]), int(self.body_all[row[k]]), float(ratio[k])
 
     def exclude(self, pairs, gid: np.ndarray) -> None:
         """The kernel's pairs (a relation of the owned rows; gid: the local rows' global ids),

@@ -9,9 +9,11 @@ energy: materials.damage), viscous work (absorbed by the artificial viscosity), 
 between bodies: parsph.contact), contact work (absorbed by its damping and friction),
 external work (body force, constraint reactions, obstacles' contact and the work that
 changes the kinetic energy of prescribed motions) and the balance total = kinetic +
-strain + plastic + damage + viscous + hourglass + contact + contact work - external, which
-is constant for an exact integration. Momenta: linear (vector) and angular (scalar in 2D,
-vector in 3D).
+strain + plastic + damage + viscous + hourglass + contact + contact work + damping work -
+external, which is constant for an exact integration. Momenta: linear (vector) and angular
+(scalar in 2D, vector in 3D), and their defects: the change that the forces between
+particles made (parsph.ledger; zero for forces equal, opposite and collinear in pairs). The
+radius of gyration of the particles about their centre of mass.
 """
 
 from __future__ import annotations
@@ -133,6 +135,12 @@ def global_parts(state, reduction: RowReduction):
     energies = state.ledger.items(state)
     bodies = state.bodies
     start = reduction.add_sums([columns])
+    n, A = state.n_owned, state.particles.arrays
+    x = state.X[:n] + state.u[:n]
+    angular = A["internal_angular_impulse"][:n]
+    defects_at = reduction.add_sums([A["internal_impulse"][:n], angular.reshape(n, -1), state.mass[:n, None] * x,
+                                  state.mass[:n] * np.einsum("na,na->n", x, x)])
+    turns = angular.reshape(n, -1).shape[1]
     terms = {t.key: [(reduction.add_sums(body), len(body)) for body in energies[t.key]] for t in TERMS}
     kinetic_at = reduction.add_sums([columns[b.lo:b.hi, 2:2 + dim] for b in bodies]) if len(bodies) > 1 else 0
     top = reduction.add_max([eta.max() if len(eta) else 0.0])
@@ -162,6 +170,19 @@ def global_parts(state, reduction: RowReduction):
             out["angular_momentum"] = float(angular[0])
         for a, name in enumerate("xyz" if dim == 3 else ""):
             out[f"angular_momentum_{name}"] = float(angular[a])
+        impulse = parts[defects_at:defects_at + dim]
+        turned = parts[defects_at + dim:defects_at + dim + turns]
+        first = parts[defects_at + dim + turns:defects_at + 2 * dim + turns]
+        second = float(parts[defects_at + 2 * dim + turns])
+        for a, name in enumerate("xyz"[:dim]):
+            out[f"momentum_defect_{name}"] = float(impulse[a])
+        if dim == 2:
+            out["angular_momentum_defect"] = float(turned[0])
+        for a, name in enumerate("xyz" if dim == 3 else ""):
+            out[f"angular_momentum_defect_{name}"] = float(turned[a])
+        total = float(mass)
+        centre = [float(c) / total for c in first]
+        out["radius_of_gyration"] = math.sqrt(max(second / total - sum(c * c for c in centre), 0.0))
         if len(bodies) > 1:
             for k, b in enumerate(bodies):
                 comps = parts[kinetic_at + k * dim:kinetic_at + (k + 1) * dim]

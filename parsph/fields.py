@@ -2,8 +2,9 @@
 material that needs it, and everything that moves, stores, mirrors or shows point data
 derives from the declarations.
 
-A `Field` says what an array is (its kind: scalar, vector, tensor, point, flags, id, or
-state: a material law's `columns` numbers per point, read at the point only),
+A `Field` says what an array is (its kind: scalar, vector, tensor, point, flags, id, moment
+(an axial vector: a scalar in 2D), or state: a material law's `columns` numbers per point,
+read at the point only),
 whether it travels with its point when ownership changes (`migrate`, which also makes it
 part of the ghost copies sent at set-up), whether checkpoints store it (`checkpoint`), and
 whether snapshots and probes may show it (`units`, None if not). How a field reflects at a
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KINDS = ("scalar", "vector", "tensor", "point", "flags", "id", "state")
+KINDS = ("scalar", "vector", "tensor", "point", "flags", "id", "state", "moment")
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,8 @@ class Field:
 
     def shape(self, dim: int) -> tuple:
         """Shape of one point's value ("flags" columns vary; not given here)."""
+        if self.kind == "moment":  # an axial vector: none in 1D, out of plane in 2D
+            return {1: (0,), 2: (), 3: (3,)}[dim]
         return {"scalar": (), "id": (), "vector": (dim,), "point": (dim,), "tensor": (dim, dim),
                 "state": (self.columns,)}[self.kind]
 

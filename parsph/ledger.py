@@ -3,6 +3,13 @@
 accumulated step by step (running totals per body, exact: exact_sum). The works are
 integrated by the trapezoidal rule over each step's displacement, as the kick-drift-kick
 scheme moves the particles.
+
+Beside the energies, each particle accumulates the impulse and the angular impulse of the
+forces between particles (formulations, hourglass control, viscosity, contact): over a
+kick-drift-kick step they are dt/2 (f_n + f_(n+1)) and dt/2 (x_n x f_n + x_(n+1) x f_(n+1)),
+exactly what those forces change the momenta by. Summed over all particles they vanish for
+forces that are equal, opposite and collinear in pairs; what is left is the momenta's
+change that no external force explains (parsph.balance_check).
 """
 
 from __future__ import annotations
@@ -11,15 +18,44 @@ import numpy as np
 
 from parsph import conditions
 from parsph.balance import TERMS
+from numba import njit
+
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
+from parsph.fields import Field, register
 from parsph.formulations import tlsph
 from parsph.materials import damage
 
 RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
            "viscous_work",  # absorbed by the artificial viscosity
            "contact_work",  # absorbed by contact damping and friction
+           "damping_work",  # taken by the mass-proportional damping (time.damping)
            "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
            "external_work")
+
+
+register(Field("viscous_heat", "scalar", owner="viscosity",
+               doc="heat the artificial viscosity gave the particle in the last step, for its material [J]"),
+         Field("internal_impulse", "vector", doc="impulse of the forces between particles on the particle [N s]"),
+         Field("internal_angular_impulse", "moment",
+               doc="angular impulse (about the origin) of the forces between particles on the particle [N m s]"))
+
+
+@njit(cache=True)
+def add_impulses(dt, f_old, f_new, x_old, x_new, impulse, angular):
+    """impulse += dt/2 (f_old + f_new), angular += dt/2 (x_old x f_old + x_new x f_new),
+    row by row (angular (n, 1) in 2D: the out-of-plane component; (n, 0) in 1D)."""
+    n, dim = f_new.shape
+    for i in range(n):
+        for a in range(dim):
+            impulse[i, a] += 0.5 * dt * (f_old[i, a] + f_new[i, a])
+        if dim == 2:
+            angular[i, 0] += 0.5 * dt * ((x_old[i, 0] * f_old[i, 1] - x_old[i, 1] * f_old[i, 0])
+                                      + (x_new[i, 0] * f_new[i, 1] - x_new[i, 1] * f_new[i, 0]))
+        elif dim == 3:
+            for a in range(3):
+                b, c = (a + 1) % 3, (a + 2) % 3
+                angular[i, a] += 0.5 * dt * ((x_old[i, b] * f_old[i, c] - x_old[i, c] * f_old[i, b])
+                                             + (x_new[i, b] * f_new[i, c] - x_new[i, c] * f_new[i, b]))
 
 
 class Ledger:
@@ -54,6 +90,33 @@ class Ledger:
         return {name: [s.to_json() for s in values] if count > 1 else values[0].to_json()
                 for name, values in zip(self.totals, per_body)}
 
+    def damp(self, sim, factor: float) -> None:
+        """Scale the owned velocities by `factor` (time.damping over a half step) and add the
+        kinetic energy it takes to the damping work; prescribed components are left out (the
+        constraints set them again)."""
+        n = sim.n_owned
+        v = sim.v[:n]
+        before = v * v
+        v *= factor
+        self.add("damping_work", np.where(sim.bcs.mask, 0.0, 0.5 * sim.mass[:n, None] * (before - v * v)))
+
+    @staticmethod
+    def give_heat(sim) -> None:
+        """The heat the artificial viscosity dissipated in the last step (trapezoidal in its
+        power) into the committed state of each particle whose law keeps one (the heat column
+        of the plastic laws: materials.law.Plastic), per unit reference volume. It is not a term of the
+        balance: the viscous work already counts it, as the plastic work counts its heat.
+        After the commit, so that the stress evaluation depends on the committed state alone
+        (a restart from a checkpoint evaluates the same)."""
+        if not sim.viscous:
+            return
+        heat = sim.particles.owned("viscous_heat")
+        for b in sim.bodies:
+            if b.law.plastic is not None:
+                state = sim.material_state(b)[0]
+                state[b.lo:b.hi, b.law.plastic.heat] += heat[b.lo:b.hi] / sim.volume[b.lo:b.hi]
+        heat[:] = 0.0
+
     def begin(self, sim) -> None:
         """Keep what the step's works need from its start (after the commit, before the kick)."""
         n = sim.n_owned
@@ -61,7 +124,7 @@ class Ledger:
         self._start = dict(u=sim.u[:n].copy(), v=sim.v[:n].copy() if sim.bcs.moving or sim.collocation else None,
                            f_hg=sim.f_hg.copy(), f_visc=sim.f_visc.copy(), force=sim.force,
                            f_cd=sim.contact.dissipation.copy() if dissipating else None, external=self.external,
-                           obstacles=None)
+                           obstacles=None, internal=sim.internal_force, heating=sim.viscous_heating.copy())
 
     def obstacles_moved(self, sim, v_half: np.ndarray, u_drift: np.ndarray) -> None:
         """Keep the changes the obstacles made to the mid-step velocity v_half and the
@@ -82,6 +145,7 @@ class Ledger:
                 self.totals["hourglass_work"][b.index].add(work)
         if sim.viscous:
             self.add("viscous_work", -0.5 * (start["f_visc"] + sim.f_visc) * du)
+            sim.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + sim.viscous_heating)
         if start["f_cd"] is not None:
             self.add("contact_work", -0.5 * (start["f_cd"] + sim.contact.dissipation) * du)
         self.external = conditions.external_force(sim)
@@ -92,6 +156,9 @@ class Ledger:
         if start["v"] is not None:
             v, v_old = sim.v[:n], start["v"]
             self.add("external_work", np.where(sim.bcs.mask, 0.5 * sim.mass[:n, None] * (v * v - v_old * v_old), 0.0))
+        A = sim.particles.arrays
+        add_impulses(dt, start["internal"], sim.internal_force, sim.X[:n] + start["u"], sim.X[:n] + sim.u[:n],
+                     A["internal_impulse"], A["internal_angular_impulse"].reshape(len(sim.X), -1))
         self._start = None
 
     @staticmethod
@@ -126,6 +193,7 @@ class Ledger:
             out["hourglass"].append([sim.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
             out["contact"].append([sim.contact.energy[lo:hi]] if sim.contact else [])
             out["contact_work"].append([acc["contact_work"]] if sim.contact and sim.contact.dissipative else [])
+            out["damping"].append([acc["damping_work"]])
             out["external"].append([acc["external_work"]])
         return out
 

@@ -116,9 +116,10 @@ def bytes_per_point(name: str, dim: int) -> int:
 HISTORY = {
     "time": "s", "step": "1", "dt": "s", "reference_updates": "1", "kinetic_energy": "J",
     **{term.column: "J" for term in TERMS}, "total_energy": "J", "contact_closest": "1",
-    "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s",
+    "disorder": "1", "disorder_max": "1", "angular_momentum": "kg m^2/s", "angular_momentum_defect": "kg m^2/s",
+    "radius_of_gyration": "m", "energy_error": "1", "momentum_error": "1", "angular_momentum_error": "1",
 }
-HISTORY_PATTERNS = ((r"momentum_[xyz]", "kg m/s"), (r"angular_momentum_[xyz]", "kg m^2/s"),
+HISTORY_PATTERNS = ((r"momentum_(defect_)?[xyz]", "kg m/s"), (r"angular_momentum_(defect_)?[xyz]", "kg m^2/s"),
                     (r"(wall|tool)[0-9]+_force_[xyz]", "N"), (r"contact_force_[xyz]\..*", "N"),
                     (r"rigid_force_[xyz]\..*", "N"), (r"rigid_torque(_[xyz])?\..*", "N m"))
 

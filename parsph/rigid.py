@@ -72,20 +72,19 @@ def held(body, constraints: list, dim: int, comm) -> bool:
     return out
 
 
-def stable_step(body, omega2: np.ndarray, v: np.ndarray, contact) -> tuple:
+def stable_step(body, omega2: np.ndarray, step_limit: np.ndarray, v: np.ndarray, contact) -> tuple:
     """(stable step, 0, its particle) of a rigid body (rows lo..hi): no strain; its
-    particles' contact springs (omega2, parsph.contact) and no particle moving more than a
-    quarter of the contact skin in a step (so that its contacts are seen coming); (inf, 0,
-    -1) if nothing bounds it."""
+    particles' contact springs (omega2, parsph.contact) and the steps their motion allows
+    (step_limit: no particle moving more than a quarter of the contact skin, no pair closing
+    in by more than its separation in a step: its contacts are seen coming); (inf, 0, -1) if
+    nothing bounds it."""
     lo, hi = body.lo, body.hi
     if contact is None or hi == lo:
         return np.inf, 0.0, -1
     springs = omega2[lo:hi]
-    speed = np.sqrt(np.einsum("na,na->n", v[lo:hi], v[lo:hi]))
     steps = np.full(hi - lo, np.inf)
     np.divide(2.0, np.sqrt(springs), out=steps, where=springs > 0)
-    np.minimum(steps, np.divide(0.25 * contact.skin, speed, out=np.full_like(speed, np.inf), where=speed > 0),
-               out=steps)
+    np.minimum(steps, step_limit[lo:hi], out=steps)
     first = int(np.argmin(steps))
     return (steps[first], 0.0, lo + first) if steps[first] < np.inf else (np.inf, 0.0, -1)
 

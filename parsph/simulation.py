@@ -85,6 +85,8 @@ class Simulation:
                 self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"])
         self.compute_forces()
+        if self.contact is not None and restart is None:
+            self.contact.check_apart(self.gid, self.body, self.X + self.u, [b.name for b in self.bodies])
         self.ledger.external = external_force(self)  # at the current state, for the work integral
         self.stable.start(self, restart["clock"] if restart else None)
 
@@ -120,11 +122,13 @@ class Simulation:
         values of the fields it reads at neighbours that are stale are refreshed (the
         displacement always: the integrator moved it). With `move_reference` (an Eulerian
         kernel's step) the reference moves to the current configuration once F and the
-        stress are known, before the force row. Sets self.force and self.acc (owned)."""
+        stress are known, before the force row. Sets self.force, of which self.internal_force
+        is the part between particles, and self.acc (owned)."""
         n = self.n_owned
         clock = time.perf_counter
         seconds = self.stage_seconds
         stale = {"d", "v"}  # moved by the integrator (v is refreshed only if a stage reads it)
+        self.step_limit.fill(np.inf)
         phases = max(len(b.stages) for b in self.bodies)
         k = 0
         while k < phases:
@@ -152,31 +156,33 @@ class Simulation:
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
             k += 1
-        force = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
+        internal = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.viscous:
-            force += self.f_visc
+            internal += self.f_visc
         if self.contact:
             t0 = clock()
             try:
-                self.contact.evaluate(self.X[:n] + self.u[:n], self.v[:n])
+                self.contact.evaluate(self.X[:n] + self.u[:n], self.v[:n], self.step_limit)
             except ArithmeticError:
                 raise ParsphError(f"contact failed at step {self.step_count + 1}, t = {self.t:.6g}: particles of "
                                   f"two bodies coincide; the run is unstable: {self.stable.advice()}") from None
-            force += self.contact.force
+            internal += self.contact.force
             seconds["contact"] += clock() - t0
-        if self.body_acc is not None:
-            force += self.mass[:n, None] * self.body_acc
-        if self.tractions:
-            self.tractions.add(force, self.t)
+        self.internal_force = internal  # the forces between particles (ledger: their impulses)
+        force = internal
+        if self.body_acc is not None or self.tractions:
+            force = internal.copy()
+            if self.body_acc is not None:
+                force += self.mass[:n, None] * self.body_acc
+            if self.tractions:
+                self.tractions.add(force, self.t)
         self.force = force
         self.acc = force / self.mass[:n, None]
 
     def _kick(self, dt: float) -> None:
-        n = self.n_owned
-        v = self.v[:n]
         if self.damping > 0:
-            v *= math.exp(-self.damping * dt)
-        v += dt * self.acc
+            self.ledger.damp(self, math.exp(-self.damping * dt))
+        self.v[:self.n_owned] += dt * self.acc
 
     def step(self, t_end: float = math.inf) -> float:
         """Advance one time step (and update the reference if due); returns the step size.
@@ -189,8 +195,11 @@ class Simulation:
         t_new = self.t + dt
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
+        if not t_new > self.t:
+            raise self.stable.standstill(self)
         for points in self.point_sets():  # the last evaluation's state is committed
             points.commit()
+        self.ledger.give_heat(self)
         self.failure.advance(self, dt)
         if self.failure.breaking:
             self.failure.break_pairs(self)
@@ -210,6 +219,8 @@ class Simulation:
             self.ledger.obstacles_moved(self, v_half, u_drift)
         self.step_dt = dt
         self.compute_forces(move_reference=self.eulerian)
+        if self.contact is not None:
+            self.contact.check_inside(self.gid, self.body, [b.name for b in self.bodies], self.step_count + 1, self.t)
         self._kick(0.5 * dt)
         prescribe_velocity(self, self.t)
         self.ledger.end(self, dt)

@@ -61,12 +61,12 @@ class StableStep:
         ref = sim.ref
         for b in sim.bodies:  # in row order: the first particle with the smallest step
             if b.rigid:
-                step, worst, first = rigid.stable_step(b, sim.omega_c2, sim.v, sim.contact)
+                step, worst, first = rigid.stable_step(b, sim.omega_c2, sim.step_limit, sim.v, sim.contact)
             else:
                 step, worst, first = tlsph.stable_time_step(
                     b.lo, b.hi, sim.fs if b.moves else sim.F, sim.F, sim.J, ref.min_spacing, ref.stiffening,
                     b.constants.wave_speed, b.law.law_id, b.constants.values, sim.dim, sim.broken, sim.omega_hg2,
-                    b.formulation.hourglass_form, sim.omega_c2, sim.scratch33)
+                    b.formulation.hourglass_form, sim.omega_c2, sim.step_limit, sim.scratch33)
             if b.moves:  # the strain since a reference that moves
                 strain = max(strain, worst)
             if step < dt or (first >= 0 and not step > 0.0):
@@ -85,22 +85,47 @@ class StableStep:
             error.agreed = True  # the same reduction on every rank
             raise error
         if not -reduced[0] > self.floor:
-            mine = [] if smallest < 0 else [(dt, int(sim.gid[smallest]),
-                                             tuple((sim.X[smallest] + sim.u[smallest]).tolist()))]
-            _, gid, x = min(c for part in sim.comm.allgather(mine) for c in part)
-            where = ", ".join(f"{c:.6g}" for c in x)
-            if not -reduced[0] > 0.0:
-                what, why = "collapsed to zero", "is flattened (a principal stretch near zero)"
-            else:
-                what = (f"fell to {-reduced[0]:.3g} s, below time.step_floor = "
-                        f"{self.settings['step_floor']:g} of the first one ({self.first:.3g} s),")
-                why = "is the most flattened (its smallest principal stretch sets the step)"
-            error = ParsphError(
-                f"the stable time step {what} at step {sim.step_count}, t = {sim.t:.6g}: "
-                f"particle {gid} at ({where}) {why}; the run is unstable: {self.advice()}")
-            error.agreed = True  # every rank found the same particle and raises this
-            raise error
+            raise self.collapsed(sim, -reduced[0], dt, smallest)
         return -reduced[0], reduced[1]
+
+    def standstill(self, sim) -> ParsphError:
+        """The error for a step too small to advance the clock (below its rounding)."""
+        error = ParsphError(f"the time step {self.dt:.3g} s no longer advances the time t = {sim.t:.6g} s (step "
+                            f"{sim.step_count}): the run would stand still; {self.advice()}")
+        error.agreed = True  # the same clock on every rank
+        return error
+
+    def collapsed(self, sim, step: float, dt: float, smallest: int) -> ParsphError:
+        """The error for a step that has collapsed (below the floor, or zero), naming the
+        particle that sets it and, if it touches another body, both bodies (collective)."""
+        touching = None
+        if smallest >= 0 and sim.contact is not None:
+            touching = sim.contact.partner(smallest)
+        mine = [] if smallest < 0 else [(dt, int(sim.gid[smallest]),
+                                         tuple((sim.X[smallest] + sim.u[smallest]).tolist()),
+                                         int(sim.body[smallest]), touching)]
+        _, gid, x, body, touching = min(c for part in sim.comm.allgather(mine) for c in part)
+        where = ", ".join(f"{c:.6g}" for c in x)
+        if not step > 0.0:
+            what = "collapsed to zero"
+        else:
+            what = (f"fell to {step:.3g} s, below time.step_floor = {self.settings['step_floor']:g} of the first "
+                    f"one ({self.first:.3g} s),")
+        names = [b.name for b in sim.bodies]
+        if touching is not None:
+            other, other_body, ratio = touching
+            why = (f"of body '{names[body]}' is at {ratio:.3g} of the contact distance from particle {other} of body "
+                   f"'{names[other_body]}': the contact between '{names[body]}' and '{names[other_body]}' has "
+                   f"failed (the bodies are pressed into each other faster than their contact springs can part "
+                   f"them); raise contact.stiffness, refine the particles, or slow the impact")
+        else:
+            why = (("is flattened (a principal stretch near zero)" if not step > 0.0 else
+                    "is the most flattened (its smallest principal stretch sets the step)")
+                   + f"; the run is unstable: {self.advice()}")
+        error = ParsphError(f"the stable time step {what} at step {sim.step_count}, t = {sim.t:.6g}: "
+                            f"particle {gid} at ({where}) {why}")
+        error.agreed = True  # every rank found the same particle and raises this
+        return error
 
     def advice(self) -> str:
         """What to change when the run has become unstable."""

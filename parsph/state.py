@@ -69,6 +69,8 @@ def settle(sim) -> None:
         sim.owners.add("updated")
     if any(b.failure for b in sim.bodies):
         sim.owners.add("damage")
+    if any(any(getattr(f, "viscosity", ())) for f in forms):
+        sim.owners.add("viscosity")
     sim.carried = fields.carried(sim.owners)  # the registered fields the particles carry
 
 
@@ -141,6 +143,9 @@ def adopt(sim, local: LocalBody) -> None:
     sim.hg_psi = np.zeros(n if variational else 0)
     sim.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in sim.bodies)
     sim.f_visc = np.zeros((n if sim.viscous else 0, dim))
+    sim.viscous_heating = np.zeros(n if sim.viscous else 0)  # the power the viscosity turns to heat [W]
+    # the step allowed by the particles' motion (closing pairs: viscosity, contact), set at each evaluation
+    sim.step_limit = np.full(n if sim.viscous or sim.scene.get("contact") else 0, np.inf)
     sim.youngs = np.array([b.constants.youngs for b in sim.bodies])[sim.body]
     arrays = dict(X=sim.X, measure=sim.measure, volume=sim.volume, mass=sim.mass, support=sim.support,
                   groups=fl["groups"][:keep], u=sim.u, v=sim.v, d=sim.d, F=sim.F, fs=sim.fs, f=sim.f,
@@ -200,13 +205,22 @@ def with_trials(arrays: dict, points: str) -> dict:
 
 def initial(sim, name: str, fl: dict, keep: int, points: str = "particles") -> np.ndarray:
     """A registered field's values on the local rows of a point set: as carried in `fl`
-    (migrated, read from a checkpoint), else its declared initial values, else zeros."""
-    if name in fl:
-        return fl[name][:keep].copy()
+    (migrated, read from a checkpoint), else its declared initial values, else zeros. A
+    state carried with fewer columns than declared (a checkpoint from before the state grew
+    columns at its end) takes the initial values of the new ones."""
     field = fields.get(name, points)
+    out = None
+    if name in fl:
+        out = fl[name][:keep].copy()
+        if field.kind != "state" or out.shape[1] == field.columns:
+            return out
     if field.initial is not None:
-        return np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
-    return np.zeros((keep,) + field.shape(sim.dim))
+        values = np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
+    else:
+        values = np.zeros((keep,) + field.shape(sim.dim))
+    if out is not None:
+        values[:, :out.shape[1]] = out
+    return values
 
 
 def reference_shift(sim) -> np.ndarray:

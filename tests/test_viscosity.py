@@ -15,26 +15,36 @@ from parsph.formulations.tlsph import artificial_viscosity
 from physics import simulation
 
 
-def pair_forces(v_j: np.ndarray) -> np.ndarray:
-    """Forces on two particles 1 mm apart on the x axis, particle 1 moving at v_j, 0 at rest."""
+def pair_forces(v_j: np.ndarray) -> tuple:
+    """Forces on two particles 1 mm apart on the x axis, particle 1 moving at v_j, 0 at rest;
+    their heating and the steps their motion allows."""
     ptr = np.array([0, 1, 2])
     idx = np.array([1, 0])
     dx = np.array([[1e-3, 0.0], [-1e-3, 0.0]])
     grad = np.array([[2.0, 0.0], [-2.0, 0.0]])  # g_ij along x_j - x_i (as F = I + sum (u_j - u_i) g_ij)
     v = np.array([[0.0, 0.0], v_j])
     mass, volume = np.array([1e-3, 2e-3]), np.array([1e-6, 1e-6])
-    out = np.zeros((2, 2))
+    out, heating, limit = np.zeros((2, 2)), np.zeros(2), np.full(2, np.inf)
     artificial_viscosity(0, 2, ptr, idx, grad, grad[::-1].copy(), dx, np.zeros((2, 2)), v, np.ones(2), 1000.0,
-                         volume, mass, np.full(2, 2.1e-3), 50.0, 1.0, 2.0, out)
-    return out
+                         volume, mass, np.full(2, 2.1e-3), 50.0, 1.0, 2.0, out, heating, limit)
+    return out, heating, limit
 
 
-def test_closing_pairs_are_damped_and_momentum_is_kept():
-    closing = pair_forces(np.array([-1.0, 0.3]))  # particle 1 moves towards particle 0
+def test_closing_pairs_are_damped_heated_and_momentum_is_kept():
+    """A closing pair is pushed apart along the line of centres with opposite forces; the
+    power they dissipate heats the two particles alike; the pair's step is at most the time
+    it takes to close at its closing speed (1 mm at 1 m/s)."""
+    v = np.array([-1.0, 0.3])  # particle 1 moves towards particle 0
+    closing, heating, limit = pair_forces(v)
     np.testing.assert_allclose(closing[0] + closing[1], 0.0, atol=1e-12 * np.abs(closing).max())
     assert closing[0, 0] < 0 < closing[1, 0]  # pushes them apart, along the line of centres
     assert closing[0, 1] == closing[1, 1] == 0.0
-    assert not pair_forces(np.array([1.0, 0.3])).any()  # separating: nothing
+    dissipated = -(closing[1] @ v)  # the forces' power, the other particle at rest
+    assert dissipated > 0.0
+    assert heating == pytest.approx([0.5 * dissipated, 0.5 * dissipated], rel=1e-12)
+    assert limit == pytest.approx([1e-3 / 1.0, 1e-3 / 1.0], rel=1e-12)
+    forces, heating, limit = pair_forces(np.array([1.0, 0.3]))  # separating: nothing
+    assert not forces.any() and not heating.any() and np.isinf(limit).all()
 
 
 DROP = """

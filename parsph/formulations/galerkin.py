@@ -219,6 +219,8 @@ class GalerkinFormulation:
         self.points = integration_set(options)  # the other set, if any
         # the Eulerian kernel: the updated reference rebuilt at every step (as for sph, rlm)
         self.updated = self.eulerian = options.get("kernel") == "eulerian"
+        self.conserves_momentum = True  # the shape functions' gradients sum to zero
+        self.conserves_energy = self.type != "kbm"  # KBM's Petrov-Galerkin force is not its energy's gradient
         self.update_every = 1 if self.updated else 0
         self.kinematics_stress, self.forces = compile_stages(dim, law, self.eulerian)
         self.couplings = []

@@ -117,6 +117,8 @@ class NodalFormulation:
         self.type = options["type"]
         self.eulerian = options.get("kernel") == "eulerian"
         self.updated = self.type == "ulsph" or self.eulerian
+        self.conserves_momentum = self.type != "rlm"  # RLM's force row [R Table 1] does not
+        self.conserves_energy = self.type != "rlm"  # nor is it the energy's gradient
         self.alpha = options["hourglass"]
         self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
         self.plastic_hourglass = options["plastic_hourglass"]  # a yielded particle's: [G §4.5], E or MACHDYN's
@@ -230,7 +232,8 @@ class NodalFormulation:
                 tlsph.artificial_viscosity(
                     body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.d, sim.v, sim.J,
                     body.density, sim.volume_r if self.updated else sim.volume, sim.mass, sim.support,
-                    body.constants.wave_speed, *self.viscosity, sim.f_visc)
-            out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc",), force_row=True))
+                    body.constants.wave_speed, *self.viscosity, sim.f_visc, sim.viscous_heating, sim.step_limit)
+            out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc", "viscous_heating", "step_limit"),
+                             force_row=True))
         return out
 

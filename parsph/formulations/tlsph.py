@@ -173,7 +173,9 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             f_i += m_i m_j (-e alpha c0 mu / rho0) W'(|X_ij|) x_ij / (r + h/100),
             mu = h v / (r + h/10),  e = max(|gamma| / |X_ij|, 0.05),
         an artificial viscosity on the hourglass mode's closing (vc = alpha, c0, rho0, E,
-        column; scaled by E_i E_j / E^2, the damage's factors). With
+        column; scaled by E_i E_j / E^2, the damage's factors). Its dampers' rate, 2 sum_j k_ij / m_i
+        with k_ij the force per unit closing speed, bounds the stable step as the springs' frequency
+        does (an explicit damper is stable for dt < 2 / rate). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -184,6 +186,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                 f_int[i, a] = 0.0
                 if hourglass != HOURGLASS_OFF:
                     f_hg[i, a] = 0.0
+            damper = 0.0
             if hourglass != HOURGLASS_OFF:
                 for a in range(6):
                     stiffness[a] = 0.0
@@ -252,14 +255,17 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                             r0 += dx[p, a] * dx[p, a]
                         r0 = math.sqrt(r0)
                         approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
+                        e = max(math.sqrt(err2) / r0, 0.05)
+                        slope = value_and_slope(kind, r0, h, dim)[1]
+                        scale = mass[i] * mass[j] * e * vc[0] * vc[1] / vc[2] * (youngs[i] / vc[3]) * (
+                            youngs[j] / vc[3])
                         if approach * closing < 0.0:
                             mu = h * approach / (r + 0.1 * h)
-                            mag = -max(math.sqrt(err2) / r0, 0.05) * vc[0] * vc[1] * mu / vc[2]
-                            slope = value_and_slope(kind, r0, h, dim)[1]
-                            c = mass[i] * mass[j] * mag * slope / (r + 0.01 * h) * (youngs[i] / vc[3]) * (
-                                youngs[j] / vc[3])
+                            c = -scale * mu * slope / (r + 0.01 * h)
                             for a in range(dim):
                                 f_hg[i, a] += c * xij[a]
+                        if bound:  # the damper's coefficient on the pair's closing speed
+                            damper += scale * h * r2 * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h))
                     elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
                         for a in range(dim):
@@ -282,6 +288,8 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                     a, b = SYMMETRIC_PAIRS[k]
                     tensor[a, b] = tensor[b, a] = stiffness[k]
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
+                if viscous:  # an explicit damper is stable for dt below 2 / (its damping rate)
+                    omega_hg2[i] += (2.0 * damper / mass[i]) ** 2
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
@@ -449,7 +457,7 @@ def spring_tensor(out, k, x, dim):
 
 @njit(cache=True, _nrt=False)
 def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass,
-                     omega_c2, C):
+                     omega_c2, step_limit, C):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(omega_el^2 + omega_hg^2 + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
@@ -469,7 +477,10 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     2 sum_j k_ij / m_i on a disordered lattice (the same in 1D). The strain max |ln s| over
     the principal stretches of fs is the distortion measure of the adaptive reference
     update. omega_c^2 (omega_c2, empty without contact) bounds the contact springs the same
-    way (parsph.contact). In the total-Lagrangian formulation fs and F are the same array. Also returns
+    way (parsph.contact). `step_limit` (empty without artificial viscosity or contact) caps
+    a particle's step by its motion: no pair closing in faster than by its separation in a
+    step (`artificial_viscosity`, parsph.contact), so that an impact faster than the wave
+    speed is seen coming. In the total-Lagrangian formulation fs and F are the same array. Also returns
     the first particle with the smallest step (-1 if there is none); the first flattened or
     inverted particle i gives (0, inf, i). Failed particles (broken) are left out: they
     carry no stress. C: 3x3 scratch."""
@@ -491,6 +502,8 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
         if len(omega_c2):
             w2 += omega_c2[i]
         dt_i = 2.0 / math.sqrt(w2)
+        if len(step_limit):
+            dt_i = min(dt_i, step_limit[i])
         if dt_i < dt:
             dt, smallest = dt_i, i
     return dt, worst, smallest
@@ -498,16 +511,21 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
 
 @njit(cache=True, _nrt=False)
 def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
-                         f_visc):
+                         f_visc, heating, step_limit):
     """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
     closing in (v_ij . x_ij < 0),
         Pi_ij = (-alpha c0 mu_ij + beta mu_ij^2) / rho_ij,  mu_ij = l v_ij . x_ij / (|x_ij|^2 + 0.01 l^2),
     l the mean smoothing length (half the support radii), rho_ij the mean current density
     rho0 / J, x and v current; the force on i is -sum_j Pi_ij (m_i rho_j g_ij - m_j rho_i g_ji) / 2
     with the pairs' kernel gradients g (rho = m / V of the volumes they were built with): the
-    usual -m_i sum_j m_j Pi_ij grad W_ij, antisymmetric in i and j (momentum is conserved)."""
+    usual -m_i sum_j m_j Pi_ij grad W_ij, antisymmetric in i and j (momentum is conserved).
+    The power a pair's forces dissipate, f_ij . (v_j - v_i) >= 0, heats its two particles
+    alike (Monaghan 1992's du_i/dt = 1/2 sum_j m_j Pi_ij v_ij . grad W_ij): `heating` [W].
+    step_limit: at most r / w over the closing pairs, w = -v_ij . x_ij / r the closing speed
+    and r = |x_ij| (the time they take to meet at that speed: `stable_time_step`)."""
     dim = dx.shape[1]
     for i in range(lo, hi):
+        heating[i] = 0.0
         for a in range(dim):
             f_visc[i, a] = 0.0
         for p in range(ptr[i], ptr[i + 1]):
@@ -520,9 +538,12 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
                 r2 += xa * xa
             if approach >= 0.0:
                 continue
+            step_limit[i] = min(step_limit[i], -r2 / approach)
             length = 0.25 * (support[i] + support[j])
             mu = length * approach / (r2 + 0.01 * length * length)
             pi = (-alpha * c0 * mu + beta * mu * mu) / (0.5 * density * (1.0 / J[i] + 1.0 / J[j]))
             rho_i, rho_j = mass[i] / gvolume[i], mass[j] / gvolume[j]
             for a in range(dim):
-                f_visc[i, a] -= 0.5 * pi * (mass[i] * rho_j * g[p, a] - mass[j] * rho_i * g_rev[p, a])
+                f = 0.5 * pi * (mass[i] * rho_j * g[p, a] - mass[j] * rho_i * g_rev[p, a])
+                f_visc[i, a] -= f
+                heating[i] -= 0.5 * f * (v[j, a] - v[i, a])

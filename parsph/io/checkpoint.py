@@ -43,7 +43,7 @@ USERBLOCK = 512  # bytes before the HDF5 data: magic, digest, zero padding
 MAGIC = b"parsph checkpoint sha256 "
 CHUNK = 4 << 20  # bytes per hashed chunk
 # keys that may change on restart: they do not change the physics of the steps taken
-RESTART_FREE = ("time.end", "time.max_steps", "time.wall_limit", "output.", "scene.description",
+RESTART_FREE = ("time.end", "time.max_steps", "time.wall_limit", "output.", "balance.", "scene.description",
                 "scene.expected", "scene.source")
 ATTRIBUTES = ("format", "scene", "groups", "clock", "totals", "schedules", "particles", "fields")
 
@@ -320,5 +320,5 @@ def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
     changed = physics_changes(old_scene, scene)
     if changed:
         raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
-                         "only time.end, time.max_steps, time.wall_limit and output settings may change "
+                         "only time.end, time.max_steps, time.wall_limit, output and balance settings may change "
                          "on restart")

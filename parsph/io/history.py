@@ -54,6 +54,10 @@ class HistoryWriter:
         self.file = h5py.File(path, "w")
         self.file.attrs["scene"] = scene_json
 
+    def note(self, name: str, texts: list) -> None:
+        """Keep `texts` (the run's warnings) as the file's attribute `name`, one per line."""
+        self.file.attrs[name] = "\n".join(texts)
+
     def pending_bytes(self) -> int:
         """Bytes the rows in memory can add to the file, at most: per series a new chunk
         every 256 rows and, for a series not yet in the file, its header and chunk index."""

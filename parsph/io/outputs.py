@@ -11,11 +11,14 @@ import os
 import time
 
 from parsph import quantities
+from parsph.balance_check import BalanceCheck
 from parsph.diagnostics import RowReduction, check_finite, check_particle_ids, history_row
 from parsph.io import checkpoint, output_dir
 from parsph.io.history import HistoryWriter
 from parsph.io.snapshots import SnapshotWriter
-from parsph.parallel.runtime import COMM, collective
+from parsph.errors import ParsphError
+from parsph.exact_sum import allsum, total
+from parsph.parallel.runtime import COMM, collective, warn
 
 
 class Schedule:
@@ -61,6 +64,7 @@ class Outputs:
         self.snapshot_due = Schedule(out["snapshot_interval"], 0, nexts.get("snapshot"))
         self.checkpoint_due = Schedule(out["checkpoint_interval"], out["checkpoint_every"], nexts.get("checkpoint"))
         self.last = -1 if data is None else sim.step_count  # the step of the last history row
+        self.balance = balance_check(sim, scene, nexts.get("balance"))
 
     def start(self) -> None:
         """A new run's first history row and snapshot."""
@@ -106,7 +110,18 @@ class Outputs:
         due = reduction.add_max([self.history is not None and self.history.write_due()])
         values = history_row(sim, reduction)
         check_finite(values, sim)
+        try:
+            warnings = self.balance.check(values)
+        except ParsphError as error:  # a strict check: the row, the history and a checkpoint first
+            if self.history is not None:
+                self.history.append(values)
+            error.args = (f"{error}; checkpoint {self.save_checkpoint()}",)
+            raise
+        for text in warnings:
+            warn(text)
         if self.history is not None:
+            if warnings:
+                self.history.note("balance_warnings", self.balance.messages)
             self.history.append(values)
         if reduction.maxima[due]:
             self.write_history()
@@ -132,10 +147,21 @@ class Outputs:
         """Collective: the history written, then a checkpoint with the schedules; its path."""
         self.write_history()
         schedules = {"history": self.history_due.next, "snapshot": self.snapshot_due.next,
-                     "checkpoint": self.checkpoint_due.next}
+                     "checkpoint": self.checkpoint_due.next, "balance": self.balance.state()}
         return checkpoint.write_checkpoint(self.out_dir, self.sim, schedules, self.scene,
                                            self.settings["checkpoint_keep"])
 
     def close(self) -> None:
         if self.history is not None:
             self.history.close()
+
+
+def balance_check(sim, scene: dict, restored: dict | None) -> BalanceCheck:
+    """The run's balance check (parsph.balance_check) of `sim`: its total mass, the axes no
+    symmetry plane is normal to, and whether its formulations conserve momentum (collective)."""
+    mass = float(allsum(sim.comm, [total(sim.mass[: sim.n_owned])])[0])
+    planes = {plane["axis"] for plane in scene["symmetry"]}
+    free = [a for a in range(sim.dim) if a not in planes]
+    momentum = all(b.formulation.conserves_momentum for b in sim.bodies)
+    energy = all(b.formulation.conserves_energy for b in sim.bodies)
+    return BalanceCheck(scene["balance"], sim.dim, mass, free, momentum, energy, restored)

@@ -11,10 +11,12 @@ d_eps = f^trial / (3 mu + H) (once sigma_Y reaches zero: the whole excess), then
 (C^p)^-1_(n+1) = F^-1 b^e F^-T. The first Piola-Kirchhoff stress is P = tau F^-T.
 
 The state of a point, in the columns of its row: (C^p)^-1 (xx, yy, zz, xy, yz, xz), the
-equivalent plastic strain eps_bar and the plastic work per unit reference volume
+equivalent plastic strain eps_bar, the plastic work per unit reference volume
 w_p = int sigma_Y d eps_bar (the dissipation of J2 flow, tau : d^p = sigma_Y d eps_bar / dt),
 exact for the increment d_eps: strain energy + plastic work then match the stress work to
-the accuracy of the time integration. Missing dimensions (plane strain in 2D, 1D) are held
+the accuracy of the time integration, and the heat per unit reference volume that other
+dissipation (the artificial viscosity) has left there (read by the laws with a temperature
+or a thermal pressure). Missing dimensions (plane strain in 2D, 1D) are held
 at unit stretch; the state is always 3D (plane strain still flows out of plane).
 
 For [R §9.5] (printed as a Jaumann rate of Kirchhoff stress, eq. 76) the same law is used:
@@ -35,17 +37,19 @@ from parsph.keys import Key, positive
 from parsph.materials.elastic import ISOTROPIC_KEYS, det, inverse, isotropic
 from parsph.materials.law import Law, Plastic, Readout
 
-COLUMNS = 8  # (C^p)^-1 in 6 columns, eps_bar, w_p
+COLUMNS = 8  # (C^p)^-1 in 6 columns, eps_bar, w_p: what every plastic law's state begins with
 WORK = 7  # scratch 3x3 matrices of the update
 PLASTIC_STRAIN, PLASTIC_WORK = 6, 7
+HEAT = 8  # the heat of other dissipation per unit reference volume, after COLUMNS (J2, Johnson-Cook)
+FLOW = 9  # Johnson-Cook's von Mises Kirchhoff stress of the last evaluation
 _SQRT_3_2 = math.sqrt(1.5)
 _SQRT_6 = math.sqrt(6.0)
 SYMMETRIC_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))  # a symmetric tensor in 6 columns
 
 
-def initial_state(n: int) -> np.ndarray:
-    """The virgin state: (C^p)^-1 = I, no plastic strain or work."""
-    out = np.zeros((n, COLUMNS))
+def initial_state(n: int, columns: int = FLOW + 1) -> np.ndarray:
+    """The virgin state: (C^p)^-1 = I, no plastic strain, work, heat or stress (`columns` wide)."""
+    out = np.zeros((n, columns))
     out[:, :3] = 1.0
     return out
 
@@ -202,6 +206,7 @@ def j2(F, dim, c, state, trial, i, P, work):
         step = excess / (3.0 * mu + hardening)
         if yield0 + hardening * (eps_bar + step) < 0.0:  # the yield stress is exhausted
             step = _SQRT_3_2 * norm / (3.0 * mu)
+    trial[i, HEAT] = state[i, HEAT]
     return corrector(F, dim, mu, bulk, state, trial, i, P, work, theta, norm, step,
                      state[i, PLASTIC_WORK] + _yield_integral(yield0, hardening, eps_bar, step))
 
@@ -253,9 +258,10 @@ LAW = Law(
                                "softening (default 0: perfectly plastic) [Pa]")),
     lambda m: isotropic(m, (m["yield_stress"], m.get("hardening_modulus") or 0.0)),
     optional=("hardening_modulus",), state="plastic_state", check=_check, doc="[G §4.5], [R §9.5]",
-    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state), readouts=READOUTS)
+    plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, HEAT, yield_stress, keep_elastic_state), readouts=READOUTS)
 # the elasto-plastic state, wherever the law's stress is evaluated (carried where a law names it)
 for _points in ("particles", "stress_points", "gauss_points"):
-    register(Field("plastic_state", "state", owner="plastic_state", points=_points, columns=COLUMNS,
+    register(Field("plastic_state", "state", owner="plastic_state", points=_points, columns=FLOW + 1,
                    initial=lambda X, gid: initial_state(len(X)),
-                   doc="committed (C^p)^-1, equivalent plastic strain and plastic work per volume"))
+                   doc="committed (C^p)^-1, equivalent plastic strain, plastic work and heat per volume, "
+                       "von Mises stress"))

@@ -33,8 +33,8 @@ from parsph.materials.law import FailureModel
 
 JOHNSON_COOK_FAILURE = 2  # the failure model's id (materials.damage.TENSILE is 1)
 INDEX = damage.STRAIN  # the damage state's column of the index D
-D1, D2, D3, D4, D5, RATE0, HOMOLOGOUS = range(7)  # the constants appended to the law's
-SIZE = 7
+D1, D2, D3, D4, D5, RATE0, HOMOLOGOUS, HOMOLOGOUS_HEAT, HEAT = range(9)  # the constants appended to the law's
+SIZE = 9
 KIRCHHOFF = 5  # the scratch matrix where the plastic laws leave their full Kirchhoff stress
 
 KEYS = dict(
@@ -48,11 +48,11 @@ KEYS = dict(
 
 
 def values(material: dict, law, law_values: np.ndarray) -> np.ndarray:
-    """The constants the compiled update reads after the law's: D1..D5, and the law's
-    eps_dot_0 and T* per unit plastic work (materials.law.Plastic.failure_terms; 1/s and
-    none without)."""
-    terms = law.plastic.failure_terms(law_values) if law.plastic.failure_terms else (1.0, 0.0)
-    return np.array([material[k] or 0.0 for k in KEYS] + list(terms))
+    """The constants the compiled update reads after the law's: D1..D5, the law's eps_dot_0
+    and T* per unit plastic work and per unit heat (materials.law.Plastic.failure_terms; 1/s
+    and none without), and its state's column of the heat."""
+    terms = law.plastic.failure_terms(law_values) if law.plastic.failure_terms else (1.0, 0.0, 0.0)
+    return np.array([material[k] or 0.0 for k in KEYS] + list(terms) + [law.plastic.heat])
 
 
 @njit(cache=True)
@@ -85,7 +85,8 @@ def accumulate(P, F, dim, c, state, trial, damaged, damaged_trial, i, work, dt):
         equivalent = math.sqrt(1.5 * s)
         triaxiality = mean / equivalent if equivalent > 0.0 else 0.0
         rate = step / (dt * c[o + RATE0]) if dt > 0.0 else 0.0
-        temperature = min(max(c[o + HOMOLOGOUS] * trial[i, PLASTIC_WORK], 0.0), 1.0)
+        heating = c[o + HOMOLOGOUS] * trial[i, PLASTIC_WORK] + c[o + HOMOLOGOUS_HEAT] * trial[i, int(c[o + HEAT])]
+        temperature = min(max(heating, 0.0), 1.0)
         fracture = strain_to_fracture(c, o, triaxiality, rate, temperature)
         index += step / fracture if fracture > 0.0 else math.inf
     damaged_trial[i, INDEX] = index

@@ -39,10 +39,11 @@ class Plastic:
 
     strain: int  # the state's column of the equivalent plastic strain
     work: int  # the state's column of the plastic work per unit reference volume
+    heat: int  # the state's column of the heat of other dissipation per unit reference volume
     yield_stress: Callable  # (constants values, state rows) -> current yield stress per row
     keep_elastic: Callable  # (state rows, F_old, F_new): the elastic state kept when F jumps (in place)
-    # (constants values) -> (reference strain rate, homologous temperature T* per unit plastic work) of the
-    # failure models (materials.johnson_cook_failure); None: 1/s and no heating
+    # (constants values) -> (reference strain rate, homologous temperature T* per unit plastic work and per
+    # unit heat) of the failure models (materials.johnson_cook_failure); None: 1/s and no heating
     failure_terms: Callable | None = None
 
 

@@ -8,7 +8,9 @@ with a perfectly plastic von Mises strength (or none):
 the pressure of the Hugoniot p_H, whose energy is p_H eta / 2 per reference volume, moved
 off it by the internal energy E per unit reference volume with Gamma rho = Gamma0 rho0. E
 is the work of the pressure, dE = -p dJ (by the trapezoidal rule over the step, solved with
-p in closed form: p is linear in E), plus the plastic work. The deviatoric part is
+p in closed form: p is linear in E), plus the plastic work and the heat of other dissipation
+(the artificial viscosity's work, which carries a shock's entropy: with it the shocked
+state is on the Hugoniot, E = p eta / 2, not on the isentrope). The deviatoric part is
 materials.elastoplastic's Hencky law and radial return with the shear modulus and a
 constant yield stress (none: no shear strength once it flows, a fluid) or Johnson-Cook's
 flow stress (materials.johnson_cook, given its constants: the impact codes' pairing). The
@@ -33,8 +35,9 @@ from parsph.materials.law import Law, Plastic, Readout, moduli
 
 MIE_GRUNEISEN = 7
 _SQRT_3_2 = math.sqrt(1.5)
-# state: the elasto-plastic columns, then the pressure's work, J and p of the last evaluation
-ENERGY, LAST_J, PRESSURE = COLUMNS, COLUMNS + 1, COLUMNS + 2
+# state: the elasto-plastic columns, then the pressure's work, J and p of the last evaluation, the heat
+# and the von Mises Kirchhoff stress of the last evaluation
+ENERGY, LAST_J, PRESSURE, HEAT, FLOW = COLUMNS, COLUMNS + 1, COLUMNS + 2, COLUMNS + 3, COLUMNS + 4
 # constants values: lam, mu, K, then (Johnson-Cook's from STRENGTH + 1 when STRENGTH is 1)
 YIELD, RHO_C2, SLOPE, GAMMA, STRENGTH = 3, 4, 5, 6, 7
 
@@ -57,13 +60,16 @@ def update(F, dim, c, state, trial, i, P, work, dt):
     if not admissible:
         return math.nan
     step = 0.0
-    if c[STRENGTH] > 0.0:
-        step, sigma = johnson_cook.return_step(c, STRENGTH + 1, _SQRT_3_2 * norm, mu, state[i, PLASTIC_STRAIN],
-                                               state[i, PLASTIC_WORK], dt)
-        plastic_work = state[i, PLASTIC_WORK] + sigma * step
+    heat = state[i, HEAT]
+    q = _SQRT_3_2 * norm
+    if c[STRENGTH] > 0.0:  # the plastic work as Johnson-Cook's (trapezoidal in the flow stress)
+        step = johnson_cook.return_step(c, STRENGTH + 1, q, mu, state[i, PLASTIC_STRAIN], state[i, PLASTIC_WORK],
+                                        heat, dt)[0]
+        trial[i, FLOW] = q - 3.0 * mu * step
+        plastic_work = state[i, PLASTIC_WORK] + 0.5 * step * (state[i, FLOW] + trial[i, FLOW])
     else:
-        if _SQRT_3_2 * norm > yield_stress:  # perfectly plastic: back to the yield surface
-            step = (_SQRT_3_2 * norm - yield_stress) / (3.0 * mu)
+        if q > yield_stress:  # perfectly plastic: back to the yield surface
+            step = (q - yield_stress) / (3.0 * mu)
         plastic_work = state[i, PLASTIC_WORK] + yield_stress * step
     psi = corrector(F, dim, mu, 0.0, state, trial, i, P, work, theta, norm, step, plastic_work)  # deviatoric
     J = math.exp(theta)
@@ -71,10 +77,10 @@ def update(F, dim, c, state, trial, i, P, work, dt):
     p_h = hugoniot(c, eta)[0]
     reference = p_h * (1.0 - 0.5 * c[GAMMA] * eta) if eta > 0.0 else p_h
     dJ = J - state[i, LAST_J]
-    p = (reference + c[GAMMA] * (state[i, ENERGY] - 0.5 * state[i, PRESSURE] * dJ + plastic_work)) / (
+    p = (reference + c[GAMMA] * (state[i, ENERGY] - 0.5 * state[i, PRESSURE] * dJ + plastic_work + heat)) / (
         1.0 + 0.5 * c[GAMMA] * dJ)
     energy = state[i, ENERGY] - 0.5 * (state[i, PRESSURE] + p) * dJ
-    trial[i, ENERGY], trial[i, LAST_J], trial[i, PRESSURE] = energy, J, p
+    trial[i, ENERGY], trial[i, LAST_J], trial[i, PRESSURE], trial[i, HEAT] = energy, J, p, heat
     Finv, tau = work[1], work[5]
     for a in range(dim):
         for b in range(dim):
@@ -85,10 +91,10 @@ def update(F, dim, c, state, trial, i, P, work, dt):
 
 
 def _initial(n: int) -> np.ndarray:
-    out = np.zeros((n, PRESSURE + 1))
-    out[:, :COLUMNS] = initial_state(n)
+    out = initial_state(n, FLOW + 1)
     out[:, LAST_J] = 1.0
     return out
+
 
 
 def _johnson_cook(c: np.ndarray) -> bool:
@@ -97,20 +103,21 @@ def _johnson_cook(c: np.ndarray) -> bool:
 
 def yield_stress(c: np.ndarray, state: np.ndarray) -> np.ndarray:
     if _johnson_cook(c):
-        return johnson_cook.yield_stress(c, state, STRENGTH + 1)
+        return johnson_cook.yield_stress(c, state, STRENGTH + 1, HEAT)
     return np.full(len(state), c[YIELD])
 
 
 def temperature(c: np.ndarray, state: np.ndarray) -> np.ndarray:
-    """Johnson-Cook's temperature of the plastic work's heat (0 without its strength)."""
+    """Johnson-Cook's temperature of the plastic work's and the other dissipation's heat (0
+    without its strength)."""
     if _johnson_cook(c):
-        return johnson_cook.temperature(c, state, STRENGTH + 1)
+        return johnson_cook.temperature(c, state, STRENGTH + 1, HEAT)
     return np.zeros(len(state))
 
 
 def failure_terms(c: np.ndarray) -> tuple:
     """Johnson-Cook's rate and heating with its strength (materials.johnson_cook.failure_terms)."""
-    return johnson_cook.failure_terms(c, STRENGTH + 1) if _johnson_cook(c) else (1.0, 0.0)
+    return johnson_cook.failure_terms(c, STRENGTH + 1) if _johnson_cook(c) else (1.0, 0.0, 0.0)
 
 
 def _constants(m: dict):
@@ -146,10 +153,11 @@ LAW = Law(
      "yield_stress": YIELD_STRESS,
      **johnson_cook.KEYS},
     _constants, optional=("yield_stress", *johnson_cook.KEYS), state="shock_state", check=_check,
-    doc="Meyers 1994, ch. 4", plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, yield_stress, keep_elastic_state,
+    doc="Meyers 1994, ch. 4", plastic=Plastic(PLASTIC_STRAIN, PLASTIC_WORK, HEAT, yield_stress, keep_elastic_state,
                                                  failure_terms),
     readouts=dict(READOUTS, temperature=Readout("K", johnson_cook.TEMPERATURE.doc, temperature)))
 for _points in ("particles", "stress_points", "gauss_points"):
-    register(Field("shock_state", "state", owner="shock_state", points=_points, columns=PRESSURE + 1,
+    register(Field("shock_state", "state", owner="shock_state", points=_points, columns=FLOW + 1,
                    initial=lambda X, gid: _initial(len(X)),
-                   doc="the elasto-plastic state, the pressure's work per reference volume, J and p"))
+                   doc="the elasto-plastic state, the pressure's work per reference volume, J, p, the heat and "
+                       "the von Mises stress"))
