@@ -22,7 +22,8 @@ into contact must be stable for it too).
 
 Optionally dissipative, per [[contact]] entry, with the pairs' relative velocity
 v_ij = v_j - v_i (the step's mid-point velocities) and the effective mass
-m* = m_i m_j / (m_i + m_j):
+m* = m_i m_j / (m_i + m_j), in which a particle of a rigid body counts with the body's
+mass (a force on it moves the whole body, or nothing if the body is held):
   - damping (`restitution` e < 1): a normal dashpot c (v_ij . n) n on i, c = 2 zeta
     sqrt(k m*), k = dF/ddelta, zeta = -ln e / sqrt(pi^2 + ln^2 e) (the restitution of a
     linear spring-dashpot), never pulling the pair together (at most the elastic force);
@@ -56,6 +57,7 @@ from numba import njit
 
 from parsph.cells import close_pairs
 from parsph.errors import InputError, ParsphError
+from parsph.exact_sum import allsum, total
 from parsph.neighbors import pair_keys
 from parsph.relations import Skin
 
@@ -113,6 +115,10 @@ class Contact:
         self.body = body[:n]
         self.gid = gid[:n]
         self.mass = mass[:n]
+        self.inertia = mass[:n].copy()  # the mass a pair's force moves: a rigid body's, for its particles
+        for b in bodies:
+            if b.rigid:
+                self.inertia[b.lo:b.hi] = float(allsum(comm, [total(mass[b.lo:b.hi])])[0])
         self.radius = 0.5 * radius_factor[body[:n]] * measure[:n] ** (1.0 / dim)
         self.modulus = modulus[body[:n]]
         self.mine = np.flatnonzero(touching[body[:n]])  # owned particles of bodies in contact
@@ -145,9 +151,9 @@ class Contact:
             self._refresh(v, self.v)
             self.v[: self.n] = v
         _repulsion(self.n, self.ptr, self.idx, self.x, self.v, self.radius_all, self.modulus_all, self.mass_all,
-                   self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt, self.dim,
-                   self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2, self.entry_force,
-                   self.closest)
+                   self.inertia_all, self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt,
+                   self.dim, self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2,
+                   self.entry_force, self.closest)
         mine = self.mine
         speed = np.sqrt(np.einsum("na,na->n", v[mine], v[mine]))
         moving = speed > 0.0
@@ -237,8 +243,8 @@ class Contact:
             sel = mine[np.einsum("na,na->n", gap, gap) <= reach * reach]
             if len(sel):
                 self.send[r] = sel
-            chunks.append((self.gid[sel], self.body[sel], self.radius[sel], self.modulus[sel], self.mass[sel])
-                          if len(sel) else None)
+            chunks.append((self.gid[sel], self.body[sel], self.radius[sel], self.modulus[sel], self.mass[sel],
+                           self.inertia[sel]) if len(sel) else None)
         received = comm.alltoall(chunks) if comm.size > 1 else [None]
         self.recv = {}
         start = n
@@ -247,8 +253,8 @@ class Contact:
                 self.recv[r] = slice(start, start + len(chunk[0]))
                 start += len(chunk[0])
         parts = [c for c in received if c is not None]
-        own = (self.gid, self.body, self.radius, self.modulus, self.mass)
-        self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all = (
+        own = (self.gid, self.body, self.radius, self.modulus, self.mass, self.inertia)
+        self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all, self.inertia_all = (
             np.concatenate([mine_k] + [c[k] for c in parts]) for k, mine_k in enumerate(own))
         self.x = np.zeros((start, self.dim))
         self.v = np.zeros((start if self.dissipative else 0, self.dim))
@@ -286,13 +292,14 @@ class Contact:
 
 
 @njit(cache=True, _nrt=False)
-def _repulsion(n, ptr, idx, x, v, radius, modulus, mass, body, entry_of, factor, zeta, friction, dt, dim, scale,
-               skin, force, dissipation, energy, omega2, entry_force, closest):
+def _repulsion(n, ptr, idx, x, v, radius, modulus, mass, inertia, body, entry_of, factor, zeta, friction, dt, dim,
+               scale, skin, force, dissipation, energy, omega2, entry_force, closest):
     """The contact force, its dissipative part (with damping or friction), energy (half of
     each pair's potential), spring bound 2 sum_j dF/ddelta / m_i (of the pairs closer than
     the contact distance plus the skin in 1D and 2D; over (sqrt(1 + zeta^2) - zeta)^2 with
     damping) and closest approach of the owned particles 0..n-1, and the force on each of
-    them from the other body of each contact entry; the pairs' forces summed in the rows'
+    them from the other body of each contact entry (mass: the particles', inertia: what a
+    pair's force moves, Contact.inertia); the pairs' forces summed in the rows'
     order (global ids)."""
     for i in range(n):
         for a in range(dim):
@@ -341,15 +348,16 @@ def _repulsion(n, ptr, idx, x, v, radius, modulus, mass, body, entry_of, factor,
                 force[i, a] += push
                 entry_force[entry, i, a] += push
             if z > 0.0 or friction[entry] > 0.0:
-                _dissipate(i, j, x, v, mass, r, f, stiffness, z, friction[entry], dt, dim, force,
+                _dissipate(i, j, x, v, inertia, r, f, stiffness, z, friction[entry], dt, dim, force,
                            dissipation, entry_force[entry])
 
 
 @njit(cache=True, inline="always")
-def _dissipate(i, j, x, v, mass, r, f, stiffness, z, mu, dt, dim, force, dissipation, entry_force):
+def _dissipate(i, j, x, v, inertia, r, f, stiffness, z, mu, dt, dim, force, dissipation, entry_force):
     """Add the dashpot (damping ratio z) and Coulomb friction (mu) of pair (i, j) to
-    particle i's force (elastic force f, stiffness dF/ddelta)."""
-    m = mass[i] * mass[j] / (mass[i] + mass[j])
+    particle i's force (elastic force f, stiffness dF/ddelta; inertia: the masses the
+    pair's force moves)."""
+    m = inertia[i] * inertia[j] / (inertia[i] + inertia[j])
     closing = 0.0  # v_ij . n, n from i to j
     for a in range(dim):
         closing += (v[j, a] - v[i, a]) * (x[j, a] - x[i, a]) / r

@@ -215,7 +215,8 @@ class Simulation:
         prescribe_displacement(self, self.t)
         if self.walls.items:  # the obstacles' changes of velocity and displacement
             v_half, u_drift = self.v[:n].copy(), self.u[:n].copy()
-            self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, dt)
+            self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, 0.5 * (self.step_dt + dt),
+                               self.rigid_bodies)
             self.ledger.obstacles_moved(self, v_half, u_drift)
         self.step_dt = dt
         self.compute_forces(move_reference=self.eulerian)

@@ -8,9 +8,16 @@ a rounded box: a smaller box grown by the radius), as the punch of [V §2.4.3].
 After each drift a particle of the obstacle's group found inside it (signed gap < 0) is
 put back on its surface along the outward normal n and loses the part of its velocity
 relative to the obstacle that moves into it: a perfectly plastic, frictionless contact
-(the tangential velocity is untouched). The impulse the obstacle gives a particle in a
-step, over the step, is its contact force on that particle; the obstacle's force is their
-exact sum (exact_sum), the same on any number of ranks.
+(the tangential velocity is untouched). A free rigid body meets the obstacles with the
+same law as a whole (parsph.rigid.RigidBody.strike): it is moved out of them, and the
+velocities of its particles inside them lose their approach, by the impulses of least
+kinetic energy. The impulse the obstacle gives a particle, over the time it stands for,
+is its contact force on that particle; the obstacle's force is their exact sum
+(exact_sum), the same on any number of ranks. That time is the two half steps before the
+drift, (dt_(n-1) + dt_n) / 2: the impulse cancels the approach the particle took from the
+forces of the last half kick of the step before and the first of this one, so that a
+particle pressed against an obstacle shows the force that presses it, on a shortened step
+too.
 """
 
 from __future__ import annotations
@@ -87,19 +94,34 @@ class Walls:
         for item in self.items:
             item.index = np.flatnonzero(masks[item.group])
 
-    def enforce(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float,
-                dt: float) -> None:
-        """Put owned particles found inside an obstacle back on its surface; record each
-        obstacle's force on each of them."""
+    def enforce(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, t: float, span: float,
+                rigid_bodies: list = ()) -> None:
+        """Put owned particles found inside an obstacle back on its surface, and the free
+        `rigid_bodies` (rigid.RigidBody) found inside any, whole; record each obstacle's
+        force on each particle: its impulse over `span`, the time the impulse stands for
+        ((dt_(n-1) + dt_n) / 2, the module's docstring)."""
+        free = np.zeros(len(X), bool)  # the free rigid bodies' rows: they meet the obstacles as bodies
+        for body in rigid_bodies:
+            free[body.body.lo:body.body.hi] = True
         for k, item in enumerate(self.items):
-            sel = item.index
+            sel = item.index[~free[item.index]]
             gap, normal = item.contact(X[sel] + u[sel], t)
             hit = gap < 0.0
             sel, gap, normal = sel[hit], gap[hit], normal[hit]
             u[sel] -= gap[:, None] * normal
             approach = np.minimum(np.einsum("na,na->n", v[sel] - item.velocity, normal), 0.0)
             v[sel] -= approach[:, None] * normal
-            self.contacts[k] = -(mass[sel] * approach)[:, None] * normal / dt
+            self.contacts[k] = -(mass[sel] * approach)[:, None] * normal / span
+        for body in rigid_bodies:
+            hits = []
+            for item in self.items:
+                rows = item.index[(item.index >= body.body.lo) & (item.index < body.body.hi)]
+                gap, normal = item.contact(X[rows] + u[rows], t)
+                hit = gap < 0.0
+                hits.append((rows[hit], gap[hit], normal[hit], item.velocity))
+            impulses = body.strike(hits, X, u, v)
+            for k, impulse in enumerate(impulses):
+                self.contacts[k] = np.concatenate([self.contacts[k], impulse / span])
 
     def force_sums(self) -> list:
         """Each obstacle's force on this rank's particles, exact (obstacle-major, then
