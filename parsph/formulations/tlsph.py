@@ -173,7 +173,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             f_i += m_i m_j (-e alpha c0 mu / rho0) W'(|X_ij|) x_ij / (r + h/100),
             mu = h v / (r + h/10),  e = max(|gamma| / |X_ij|, 0.05),
         an artificial viscosity on the hourglass mode's closing (vc = alpha, c0, rho0, E,
-        column; scaled by E_i E_j / E^2, the damage's factors). Its dampers' rate, 2 sum_j k_ij / m_i
+        column; scaled by E_i E_j / E^2, the damage's factors). Its dampers' rate, sum_j k_ij / m_i
         with k_ij the force per unit closing speed, bounds the stable step as the springs' frequency
         does (an explicit damper is stable for dt < 2 / rate). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
@@ -289,7 +289,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                     tensor[a, b] = tensor[b, a] = stiffness[k]
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
                 if viscous:  # an explicit damper is stable for dt below 2 / (its damping rate)
-                    omega_hg2[i] += (2.0 * damper / mass[i]) ** 2
+                    omega_hg2[i] += (damper / mass[i]) ** 2
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
