@@ -284,7 +284,7 @@ def _table(path: str, raw: Any, keys: dict[str, Key], dim: int | None) -> dict:
             raise InputError(f"unknown key '{where}'{_suggest(name, keys)}")
     for name, key in keys.items():
         where = f"{path}.{name}" if path else name
-        if name in raw:
+        if raw.get(name) is not None:  # None: absent (a resolved scene's optional key)
             out[name] = raw[name] if key.kind == "table" else _coerce(where, key, raw[name], dim)
         elif key.default is REQUIRED:
             raise InputError(f"missing required key '{where}'")
@@ -395,7 +395,7 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         if any(c < 0 or c >= dim for c in bc["components"]) or not bc["components"]:
             raise InputError(f"bc[{i}].components must be a non-empty list of integers in [0, {dim - 1}]")
         if bc["type"] == "fixed":
-            if bc["value"] is not None or bc["expression"] is not None:
+            if any(bc["value"] or ()) or bc["expression"] is not None:  # a resolved scene's is zero
                 raise InputError(f"bc[{i}]: a 'fixed' condition takes no value")
             bc["value"] = [0.0] * dim
         else:
@@ -720,7 +720,7 @@ def validate(raw: dict) -> dict:
             continue
         given = raw.get(section, {})
         if multi and section == "geometry":
-            if isinstance(given, dict) and "parts" in given:
+            if isinstance(given, dict) and given.get("parts"):  # a resolved scene's is empty
                 raise InputError("a scene with [[bodies]] gives each body its own [[bodies.parts]]; "
                                  "remove geometry.parts")
             given = dict(given, parts=[]) if isinstance(given, dict) else given
