@@ -319,6 +319,45 @@ def test_overwrite_keeps_previous_run_when_new_scene_is_bad(tmp_path):
     assert snapshot_files(out) == before
 
 
+# ------------------------------------------------------------------ plot
+@pytest.fixture(scope="module")
+def bar_output(tmp_path_factory):
+    """A short run of the bar with three snapshots."""
+    folder = tmp_path_factory.mktemp("plot")
+    proc = parsph(["run", write(folder, BAR), "--out", folder / "run", "--quiet", "--set", "time.end=2e-4",
+                   "--set", "output.snapshot_interval=1e-4"])
+    assert proc.returncode == 0, proc.stderr
+    return folder / "run"
+
+
+PLOT_REFUSALS = {  # name: (the arguments after `plot`, given the run's directory; expected stderr parts)
+    "frames-negative": (lambda run: [run / "snapshots.h5", "--frames", "-3"], ["--frames = -3", "at least 1"]),
+    "frames-zero": (lambda run: [run / "snapshots.h5", "--frames", "0"], ["--frames = 0", "at least 1"]),
+    "limits-reversed": (lambda run: [run / "snapshots.h5", "--limits", "1", "0"], ["--limits 1 0", "LOW < HIGH"]),
+    "frames-of-a-history": (lambda run: [run / "history.h5", "--frames", "2"], ["apply to a plot of snapshots"]),
+    "directory": (lambda run: [run], ["is a directory: give a run's history.h5 or snapshots.h5"]),
+    "toml-file": (lambda run: [RUNS / "bar1d.toml"], ["bar1d.toml cannot be read: it is not an HDF5 file"]),
+    "output-in-a-missing-directory": (lambda run: [run / "history.h5", "-o", run / "missing" / "plot.png"],
+                                      ["the plot cannot be written to", "plot.png"]),
+    "output-under-a-file": (lambda run: [run / "history.h5", "-o", run / "scene.json" / "plot.png"],
+                            ["the plot cannot be written to", "plot.png"]),
+    "output-over-the-snapshots": (lambda run: [run / "history.h5", "-o", run / "snapshots.h5"],
+                                  ["snapshots.h5 must be a .png file"]),
+}
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+@pytest.mark.parametrize("name", list(PLOT_REFUSALS))
+def test_plot_refuses_bad_input_and_keeps_the_run(bar_output, name, ranks):
+    from parsph.io import read_history, read_snapshots
+
+    args, expect = PLOT_REFUSALS[name]
+    proc = parsph(["plot", *args(bar_output)], ranks=ranks)
+    assert_bad_input(proc, expect)
+    assert not list(bar_output.rglob("*.png")), "a refused plot wrote a file"
+    assert len(read_snapshots(bar_output)) == 3 and len(read_history(bar_output)["time"]) > 1
+
+
 # ------------------------------------------------------------------ check, info, run
 @pytest.mark.parametrize("ranks", RANKS)
 def test_check_prints_resolved_scene(ranks):

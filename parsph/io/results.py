@@ -37,20 +37,22 @@ class Snapshot:
                            f"{', '.join(sorted(self.fields))}") from None
 
 
-def _file(out: str | os.PathLike, name: str) -> str:
+def _file(out: str | os.PathLike, name: str | None) -> str:
     """`out` itself if it is a file, else the file `name` of the run directory `out`."""
     path = os.fspath(out)
-    path = path if os.path.isfile(path) else os.path.join(path, name)
+    if name is None and os.path.isdir(path):
+        raise InputError(f"{path} is a directory: give a run's history.h5 or snapshots.h5")
+    path = path if os.path.isfile(path) or name is None else os.path.join(path, name)
     if not os.path.isfile(path):
-        raise InputError(f"{path} does not exist: give a run's output directory or its {name}")
+        raise InputError(f"{path} does not exist" + (f": give a run's output directory or its {name}" if name else ""))
     return path
 
 
 @contextlib.contextmanager
-def _open(out: str | os.PathLike, name: str):
-    """The run's file `name` (history.h5 or snapshots.h5; `out`: it or the run's directory)
-    open for reading, checked to be of that kind; any failure to read it is an InputError
-    naming it."""
+def _open(out: str | os.PathLike, name: str | None):
+    """The run's file `name` (history.h5 or snapshots.h5; `out`: it or the run's directory;
+    None: the file `out`, of either kind) open for reading, checked to be of that kind; any
+    failure to read it is an InputError naming it."""
     path = _file(out, name)
     try:
         with h5py.File(path, "r") as f:
@@ -65,7 +67,7 @@ def _open(out: str | os.PathLike, name: str):
 
 def _check_kind(f, path: str, name: str) -> None:
     """InputError unless the open file `f` is a history (1-D series at its root) or a
-    snapshots file (step_* groups and their connectivity), as `name` asks."""
+    snapshots file (step_* groups and their connectivity), as `name` asks (None: either)."""
     groups = sorted(k for k in f if isinstance(f[k], h5py.Group))
     series = sorted(k for k in f if k not in groups and k != "connectivity")
     if name == "history.h5" and (groups or "connectivity" in f):
@@ -74,6 +76,15 @@ def _check_kind(f, path: str, name: str) -> None:
     if name == "snapshots.h5" and series:
         raise InputError(f"{path} is not a run's snapshots: it holds the series {', '.join(series[:3])}"
                          f"{', ...' if len(series) > 3 else ''}; read it with read_history, or give snapshots.h5")
+
+
+def file_kind(path: str | os.PathLike) -> str:
+    """What the run's file `path` holds: "history" or "snapshots" (InputError if neither,
+    or nothing yet)."""
+    with _open(path, None) as f:
+        if not len(f):
+            raise InputError(f"{path} holds no history rows or snapshots yet")
+        return "snapshots" if "connectivity" in f or any(isinstance(f[k], h5py.Group) for k in f) else "history"
 
 
 def read_history(out: str | os.PathLike) -> dict:
