@@ -23,7 +23,7 @@ from typing import Any
 
 from parsph import expressions, quantities
 from parsph.errors import InputError
-from parsph.keys import REQUIRED, Key, in_range, non_negative, one_of, positive
+from parsph.keys import REQUIRED, Key, greater_than, in_range, non_negative, one_of, positive
 from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
 from parsph.materials import FAILURE_KEYS, LAW_KEYS, LAWS, check_failure, constants, failure_of
 
@@ -207,13 +207,15 @@ PROBE_KEYS = {
 }
 CONTACT_KEYS = {
     "bodies": Key("strlist", REQUIRED, doc="the names of the two bodies that touch (parsph.contact)"),
-    "radius": Key("float", 1.0, positive,
+    "radius": Key("float", 1.0, greater_than(0.5),
                   "contact radius of a particle over half its spacing: two particles touch when their "
-                  "centres are closer than the mean of their spacings times this (at most the kernel "
-                  "support)"),
-    "stiffness": Key("float", 1.0, positive, "factor on the contact stiffness of parsph.contact (Hertz's with the "
-                                             "bodies' moduli at 1; raise it where the pressure is a sizeable "
-                                             "fraction of the modulus, for less overlap and a shorter step)"),
+                  "centres are closer than the mean of their spacings times this (above 0.5: at 0.5 a "
+                  "particle passes untouched between two of the other body's; at most the kernel support)"),
+    "stiffness": Key("float", 1.0, in_range(0.01, 1.0e4),
+                     "factor on the contact stiffness of parsph.contact (Hertz's with the bodies' moduli at 1; "
+                     "raise it where the pressure is a sizeable fraction of the modulus, for less overlap and a "
+                     "shorter step; in [0.01, 1e4]: below, a pair gives way to a pressure of about a per cent "
+                     "of the modulus, above, the contact's springs shorten the step a hundredfold)"),
     "restitution": Key("float", 1.0, in_range(0.0, 1.0),
                        "coefficient of restitution of a pair's normal impact (a dashpot; 1: none)"),
     "friction": Key("float", 0.0, non_negative, "Coulomb friction coefficient between the two bodies"),
@@ -628,6 +630,10 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
         body["parts"] = _validate_parts(body["parts"], dim, f"{path}.parts")
         body["material"] = _table(f"{path}.material", body["material"], SECTIONS["material"], dim)
         _validate_material(f"{path}.material", body["material"])
+        model = failure_of(body["material"])
+        if body["rigid"] and (model or body["material"]["break_pairs"]):
+            raise InputError(f"{path}.material.{model.key if model else 'break_pairs'}: body '{body['name']}' is rigid: "
+                             "it carries no stress, so it is never damaged and does not fail or lose pairs")
         if not isinstance(body["formulation"], dict):
             raise InputError(f"{path}.formulation must be a table")
         merged = dict(raw_formulation if isinstance(raw_formulation, dict) else {}, **body["formulation"])
