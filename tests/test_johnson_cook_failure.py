@@ -249,3 +249,14 @@ def test_damage_work_is_zero_until_a_particle_fails():
     assert np.all(with_failure["damage_work"] == 0.0)
     for name in ("kinetic_energy", "strain_energy", "plastic_work", "total_energy"):
         assert np.array_equal(with_failure[name], without[name]), name
+
+
+def test_the_copper_rod_with_johnson_and_cooks_failure_constants_takes_no_damage_work():
+    """runs/taylor_jc at 8 layers with copper's failure constants (COPPER) to 5 us: the foot
+    yields and its index grows, no particle fails, and the damage work is 0 in every row
+    (it read -0.41 J, the trapezoidal rule's difference from the law's plastic work)."""
+    constants = [f"material.{k}={COPPER[k]}" for k in ("jc_d1", "jc_d2", "jc_d3", "jc_d4", "jc_d5")]
+    h = run_until(simulation("taylor_jc", ["parameters.layers=8", *constants]), 5e-6, every=10,
+                  probe=lambda s: s.quantity("failure_index").max())
+    assert h["plastic_work"][-1] > 0.0 and 0.1 < h["probe"][-1] < 1.0
+    assert np.all(h["damage_work"] == 0.0)
