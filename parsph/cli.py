@@ -93,6 +93,9 @@ def main(argv=None) -> int:
 
     try:
         if args.command == "run":
+            from parsph.parallel.runtime import warn_if_oversubscribed
+
+            warn_if_oversubscribed()  # before the imports and the set-up, which crowded ranks slow down
             from parsph.run import run
 
             return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart, args.debug,

@@ -17,7 +17,7 @@ from typing import Callable
 
 import pytest
 
-from conftest import BAR, CEILING, ROOT, RUNS, parsph
+from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph
 
 
 # A small 2D scene (random particles in a patch) for the "zero particles" count.
@@ -579,3 +579,32 @@ def test_run_two_ranks_writes_finite_history(tmp_path):
     assert series["step"][-1] == 50
     assert series["kinetic_energy"][0] > 0  # the right quarter starts at 5 m/s
     assert series["tip_displacement"][-1] > 0  # ... and moves right
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity on this system")
+def test_more_ranks_than_cores_get_one_warning(tmp_path):
+    """Two ranks allowed one core between them (their CPU affinity): rank 0 warns once that
+    they slow each other down and to run fewer; the run goes on. With a core each (if the
+    machine has two) there is no warning."""
+    import subprocess
+    import sys
+
+    cores = sorted(os.sched_getaffinity(0))
+
+    def run(allowed):
+        cmd = [mpiexec(), "-n", "2", sys.executable, "-m", "parsph", "run", str(RUNS / "bar1d.toml"), "--out",
+               str(tmp_path / f"cores_{len(allowed)}"), "--quiet", "--set", "time.max_steps=2"]
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                              preexec_fn=lambda: os.sched_setaffinity(0, allowed))
+
+    proc = run(cores[:1])
+    assert proc.returncode == 0, proc.stderr
+    warning = "parsph: warning: 2 ranks share 1 core(s) on a node"
+    assert proc.stderr.count(warning) == 1 and proc.stderr.count("warning") == 1, proc.stderr
+    assert "busy-polling" in proc.stderr and "run fewer ranks (-n 1)" in proc.stderr, proc.stderr
+    assert "parsph: scene" in proc.stdout
+    if len(cores) >= 2:
+        proc = run(cores[:2])
+        assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr
