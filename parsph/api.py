@@ -44,5 +44,9 @@ def load_scene(source, overrides=()) -> dict:
 
 def build(scene: dict, comm=MPI.COMM_SELF) -> Simulation:
     """The simulation of a resolved scene (load_scene) on the ranks of `comm` (collective),
-    at t = 0 with its initial conditions applied and its first forces evaluated."""
+    at t = 0 with its initial conditions applied and its first forces evaluated. The scene
+    is validated as a scene file is (a resolved scene passes unchanged)."""
+    if not isinstance(scene, dict):
+        raise InputError(f"build takes a scene table (load_scene's), got {type(scene).__name__}: load it first")
+    scene = config.validate(scene)
     return Simulation(scene, build_local(scene, comm), comm)

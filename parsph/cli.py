@@ -46,12 +46,12 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     sub.add_parser("info", help="print the environment: versions, ranks, parallel HDF5, threads")
     pl = sub.add_parser("plot", help="plot history series or snapshot fields to PNG")
-    pl.add_argument("file", help="OUT/history.h5 or OUT/snapshots.h5")
+    pl.add_argument("file", help="a run's history.h5 or snapshots.h5 (told apart by what they hold)")
     pl.add_argument("names", nargs="*", help="history series (default: energies) or one snapshot field (default: J)")
-    pl.add_argument("--frames", type=int, default=4, help="snapshots to draw side by side (1: the last)")
+    pl.add_argument("--frames", type=int, help="snapshots to draw side by side (default 4; 1: the last)")
     pl.add_argument("--limits", type=float, nargs=2, metavar=("LOW", "HIGH"),
                     help="colour scale of a snapshot field (default: its range over the frames)")
-    pl.add_argument("--output", "-o", help="PNG file (default next to the input file)")
+    pl.add_argument("--output", "-o", help=".png file (default next to the input file)")
     return p
 
 
@@ -93,6 +93,9 @@ def main(argv=None) -> int:
 
     try:
         if args.command == "run":
+            from parsph.parallel.runtime import warn_if_oversubscribed
+
+            warn_if_oversubscribed()  # before the imports and the set-up, which crowded ranks slow down
             from parsph.run import run
 
             return run(args.scene, args.out, args.set, args.overwrite, args.quiet, args.restart, args.debug,
@@ -109,16 +112,13 @@ def main(argv=None) -> int:
         elif args.command == "info":
             info()
         elif args.command == "plot":
-            from parsph.errors import InputError
             from parsph.io import plots
+            from parsph.parallel.runtime import COMM, collective
 
-            if not os.path.exists(args.file):
-                raise InputError(f"file not found: {args.file}")
-            if os.path.basename(args.file).startswith("snapshots"):
-                print(plots.plot_snapshots(args.file, (args.names or ["J"])[0], args.frames, args.output,
-                                           args.limits))
-            else:
-                print(plots.plot_history(args.file, args.names, args.output))
+            with collective():  # rank 0 plots; the others end as it does
+                written = plots.plot(args.file, args.names, args.output, args.frames, args.limits) \
+                    if COMM.rank == 0 else None
+            say(written)
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:  # the reader of the output (`| head`) has stopped reading

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from parsph import rigid
+from parsph.errors import InputError
 from parsph.parallel.runtime import collective
 from parsph.rigid import RigidBody
 
@@ -56,6 +57,8 @@ def free_rigid_bodies(sim, restart: dict | None) -> list:
     for b in sim.bodies:
         with collective(sim.comm):
             free = b.rigid and not rigid.held(b, sim.bcs.items, sim.dim, sim.comm)
+            if b.rigid and restart is None:
+                check_rigid_motion(sim, b, free)
         if free:
             body = RigidBody(b, sim.mass, sim.X, sim.comm)
             if restart is None:
@@ -64,3 +67,29 @@ def free_rigid_bodies(sim, restart: dict | None) -> list:
                 body.restore(restart["totals"]["rigid"][len(out)])
             out.append(body)
     return out
+
+
+def check_rigid_motion(sim, b, free: bool) -> None:
+    """InputError unless the conditions at t = 0 move the rigid body `b` rigidly
+    (collective): each [[bc]] that holds it gives all its particles one value (not an
+    expression of position), and no initial displacement moves its particles (a free body
+    starts where its parts put it, a held one where its [[bc]] put it: uniformly)."""
+    for i, c in enumerate(sim.bcs.items):
+        mine = (c.index >= b.lo) & (c.index < b.hi)
+        if _spread(sim.comm, c.value.reshape(len(c.index), len(c.components))[mine]) > 0.0:
+            raise InputError(f"bc[{i}] gives the particles of rigid body '{b.name}' different values (an "
+                             "expression of position), which would deform it: hold a rigid body with one value")
+    u = sim.u[b.lo:b.hi]
+    if _spread(sim.comm, np.vstack([u, np.zeros((1, sim.dim))]) if free else u) > 0.0:
+        raise InputError(f"an [[initial]] displacement moves the particles of rigid body '{b.name}': a rigid body "
+                         "starts where its parts put it (give it an initial velocity, or move it with [[bc]])")
+
+
+def _spread(comm, rows: np.ndarray) -> float:
+    """The largest difference between two rows of `rows` in a component, over all ranks
+    (collective)."""
+    bounds = [b for b in comm.allgather((rows.min(axis=0), rows.max(axis=0)) if len(rows) else None) if b]
+    if not bounds:
+        return 0.0
+    return float(np.max(np.max([hi for _, hi in bounds], axis=0) - np.min([lo for lo, _ in bounds], axis=0),
+                        initial=0.0))

@@ -23,7 +23,7 @@ from typing import Any
 
 from parsph import expressions, quantities
 from parsph.errors import InputError
-from parsph.keys import REQUIRED, Key, in_range, non_negative, one_of, positive
+from parsph.keys import REQUIRED, Key, greater_than, in_range, non_negative, one_of, positive
 from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
 from parsph.materials import FAILURE_KEYS, LAW_KEYS, LAWS, check_failure, constants, failure_of
 
@@ -219,13 +219,15 @@ PROBE_KEYS = {
 }
 CONTACT_KEYS = {
     "bodies": Key("strlist", REQUIRED, doc="the names of the two bodies that touch (parsph.contact)"),
-    "radius": Key("float", 1.0, positive,
+    "radius": Key("float", 1.0, greater_than(0.5),
                   "contact radius of a particle over half its spacing: two particles touch when their "
-                  "centres are closer than the mean of their spacings times this (at most the kernel "
-                  "support)"),
-    "stiffness": Key("float", 1.0, positive, "factor on the contact stiffness of parsph.contact (Hertz's with the "
-                                             "bodies' moduli at 1; raise it where the pressure is a sizeable "
-                                             "fraction of the modulus, for less overlap and a shorter step)"),
+                  "centres are closer than the mean of their spacings times this (above 0.5: at 0.5 a "
+                  "particle passes untouched between two of the other body's; at most the kernel support)"),
+    "stiffness": Key("float", 1.0, in_range(0.01, 1.0e4),
+                     "factor on the contact stiffness of parsph.contact (Hertz's with the bodies' moduli at 1; "
+                     "raise it where the pressure is a sizeable fraction of the modulus, for less overlap and a "
+                     "shorter step; in [0.01, 1e4]: below, a pair gives way to a pressure of about a per cent "
+                     "of the modulus, above, the contact's springs shorten the step a hundredfold)"),
     "restitution": Key("float", 1.0, in_range(0.0, 1.0),
                        "coefficient of restitution of a pair's normal impact (a dashpot; 1: none)"),
     "friction": Key("float", 0.0, non_negative, "Coulomb friction coefficient between the two bodies"),
@@ -296,7 +298,7 @@ def _table(path: str, raw: Any, keys: dict[str, Key], dim: int | None) -> dict:
             raise InputError(f"unknown key '{where}'{_suggest(name, keys)}")
     for name, key in keys.items():
         where = f"{path}.{name}" if path else name
-        if name in raw:
+        if raw.get(name) is not None:  # None: absent (a resolved scene's optional key)
             out[name] = raw[name] if key.kind == "table" else _coerce(where, key, raw[name], dim)
         elif key.default is REQUIRED:
             raise InputError(f"missing required key '{where}'")
@@ -407,7 +409,7 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         if any(c < 0 or c >= dim for c in bc["components"]) or not bc["components"]:
             raise InputError(f"bc[{i}].components must be a non-empty list of integers in [0, {dim - 1}]")
         if bc["type"] == "fixed":
-            if bc["value"] is not None or bc["expression"] is not None:
+            if any(bc["value"] or ()) or bc["expression"] is not None:  # a resolved scene's is zero
                 raise InputError(f"bc[{i}]: a 'fixed' condition takes no value")
             bc["value"] = [0.0] * dim
         else:
@@ -640,6 +642,10 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
         body["parts"] = _validate_parts(body["parts"], dim, f"{path}.parts")
         body["material"] = _table(f"{path}.material", body["material"], SECTIONS["material"], dim)
         _validate_material(f"{path}.material", body["material"])
+        model = failure_of(body["material"])
+        if body["rigid"] and (model or body["material"]["break_pairs"]):
+            raise InputError(f"{path}.material.{model.key if model else 'break_pairs'}: body '{body['name']}' is rigid: "
+                             "it carries no stress, so it is never damaged and does not fail or lose pairs")
         if not isinstance(body["formulation"], dict):
             raise InputError(f"{path}.formulation must be a table")
         merged = dict(raw_formulation if isinstance(raw_formulation, dict) else {}, **body["formulation"])
@@ -732,7 +738,7 @@ def validate(raw: dict) -> dict:
             continue
         given = raw.get(section, {})
         if multi and section == "geometry":
-            if isinstance(given, dict) and "parts" in given:
+            if isinstance(given, dict) and given.get("parts"):  # a resolved scene's is empty
                 raise InputError("a scene with [[bodies]] gives each body its own [[bodies.parts]]; "
                                  "remove geometry.parts")
             given = dict(given, parts=[]) if isinstance(given, dict) else given

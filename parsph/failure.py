@@ -12,6 +12,7 @@ from mpi4py import MPI
 from parsph import conditions
 from parsph.formulations import reference
 from parsph import materials
+from parsph.ledger import intact_law_work, start_damage_work
 from parsph.materials import damage
 from parsph.neighbors import crossing, find_pairs
 from parsph.parallel.runtime import collective
@@ -30,7 +31,10 @@ class Failure:
         (materials.FAILURES: tensile damage grows, a Johnson-Cook index of 1 fails its point)."""
         for b in self.bodies:
             if b.failure:
-                materials.FAILURES[b.failure].advance(sim.damage_state(b)[0][b.lo:b.hi], b, sim.support[b.lo:b.hi], dt)
+                state = sim.damage_state(b)[0][b.lo:b.hi]
+                intact = state[:, damage.DAMAGE] == 0.0
+                materials.FAILURES[b.failure].advance(state, b, sim.support[b.lo:b.hi], dt)
+                start_damage_work(sim, b, b.lo + np.flatnonzero(intact & (state[:, damage.DAMAGE] > 0.0)))
         self.find_broken(sim)
 
     def find_broken(self, sim) -> None:
@@ -70,9 +74,10 @@ class Failure:
         off from its body: it fails too). The forces are evaluated on the new pairs; the
         change of F this makes does no work (the particles do not move): an elasto-plastic
         particle keeps its elastic state (its plastic metric takes the change), an elastic
-        one's stress changes, and the damage state's work W is kept, so that the strain
-        energy it releases counts as damage work, and the hourglass penalty it drops as
-        released (the balance stays closed)."""
+        one's stress changes, and the strain energy it releases counts as damage work (a
+        damaged particle's work W is kept; an intact one's release is added to the ledger's
+        damage_released), and the hourglass penalty it drops as released (the balance
+        stays closed)."""
         n = sim.n_owned
         state, trial = sim.particles.arrays["damage"], sim.particles.arrays["damage_trial"]
         new = self.failed(state[:n], sim.body) & ~self.detached[:n]
@@ -91,10 +96,14 @@ class Failure:
                     tolerant=True)
             if not sim.comm.allreduce(len(ref.bad)):
                 break
+            for b in (b for b in self.bodies if b.failure):  # cut off from their bodies: they fail too
+                cut_off = ref.bad[(ref.bad >= b.lo) & (ref.bad < b.hi)]
+                start_damage_work(sim, b, cut_off[state[cut_off, damage.DAMAGE] == 0.0])
             state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
         sim.ref, self.detached = ref, detached  # the stages read sim.ref when they run
         sim.exclude_kernel_pairs()
         penalty = sim.hg_psi.copy()
+        held = intact_law_work(sim)
         work = state[:, damage.WORK].copy()
         F_old = sim.F[:n].copy()
         sim.compute_forces()
@@ -104,6 +113,7 @@ class Failure:
         if plastic:
             sim.compute_forces()
         sim.ledger.add("hourglass_released", penalty[:n] - sim.hg_psi[:n])
+        sim.ledger.add("damage_released", held - intact_law_work(sim))
         trial[:, damage.WORK] = work
         for points in sim.point_sets():
             points.commit()

@@ -28,6 +28,13 @@ def non_negative(v):
     return None if v >= 0 else "must be >= 0"
 
 
+def greater_than(lo):
+    def check(v):
+        return None if v > lo else f"must be > {lo}"
+
+    return check
+
+
 def one_of(*choices):
     def check(v):
         return None if v in choices else f"must be one of {', '.join(map(repr, choices))}"

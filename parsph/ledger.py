@@ -30,6 +30,7 @@ RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
            "contact_work",  # absorbed by contact damping and friction
            "damping_work",  # taken by the mass-proportional damping (time.damping)
            "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
+           "damage_released",  # strain energy and plastic work broken pairs release from intact particles
            "external_work")
 
 
@@ -176,8 +177,9 @@ class Ledger:
     def items(self, sim) -> dict:
         """What this rank sums for each term of each body (arrays, or exact_sum.Exact running
         totals): strain (V^0 psi of the owned integration points), plastic work (V^0 w_p),
-        damage work (the work the particles have taken beyond their strain energy and
-        plastic work, V^0 (W - psi - w_p): materials.damage), viscous work, hourglass (the
+        damage work (the work the damaged particles have taken beyond their strain energy
+        and plastic work, V^0 (W - psi - w_p): materials.damage, and what broken pairs
+        released from the intact ones), viscous work, hourglass (the
         particles' penalty, the work absorbed on this rank by the paper form, the penalty
         released since), contact (each particle's half of its pairs' potential:
         parsph.contact), contact work and external work."""
@@ -188,7 +190,8 @@ class Ledger:
             out["strain"].append([b.formulation.integrated(sim, b, lambda A: A["psi"])])
             out["plastic"].append([] if not b.law.plastic else [b.formulation.integrated(
                 sim, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work])])
-            out["damage"].append([] if not b.failure else [sim.volume[lo:hi] * _damage_work(sim, b)])
+            out["damage"].append([] if not b.failure else [sim.volume[lo:hi] * _damage_work(sim, b),
+                                                           acc["damage_released"]])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([sim.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
             out["contact"].append([sim.contact.energy[lo:hi]] if sim.contact else [])
@@ -203,10 +206,40 @@ class Ledger:
 
 
 def _damage_work(sim, b) -> np.ndarray:
-    """W - psi - w_p at `b`'s owned particles: the work they have taken (materials.damage)
-    beyond their strain energy and, with a plastic law, their plastic work (counted as such)."""
+    """W - psi - w_p at `b`'s owned particles that are damaged (0 at the others): the work
+    they have taken (materials.damage) beyond their strain energy and, with a plastic law,
+    their plastic work (counted as such), since they were first damaged (start_damage_work)."""
     lo, hi = b.lo, b.hi
-    out = sim.damage_state(b)[1][lo:hi, damage.WORK] - sim.psi[lo:hi]
+    trial = sim.damage_state(b)[1]
+    rows = np.arange(lo, hi)
+    return np.where(trial[lo:hi, damage.DAMAGE] > 0.0, trial[lo:hi, damage.WORK] - law_work(sim, b, rows, 1), 0.0)
+
+
+def law_work(sim, b, rows: np.ndarray, which: int = 0) -> np.ndarray:
+    """psi + w_p at the owned `rows` of body `b`: its law's strain energy of the last
+    evaluation and its plastic work (committed, `which` 0, or trial, 1)."""
+    out = sim.psi[rows]
     if b.law.plastic:
-        out = out - sim.material_state(b)[1][lo:hi, b.law.plastic.work]
+        out = out + sim.material_state(b)[which][rows, b.law.plastic.work]
     return out
+
+
+def intact_law_work(sim) -> np.ndarray:
+    """V^0 (psi + w_p) (trial) at the owned particles of the bodies with a failure model
+    whose committed damage is 0 (0 at the others): what a break of pairs can release from
+    them (failure.Failure.break_pairs)."""
+    out = np.zeros(sim.n_owned)
+    for b in (b for b in sim.bodies if b.failure):
+        rows = np.arange(b.lo, b.hi)
+        intact = sim.damage_state(b)[0][rows, damage.DAMAGE] == 0.0
+        out[rows[intact]] = sim.volume[rows[intact]] * law_work(sim, b, rows[intact], 1)
+    return out
+
+
+def start_damage_work(sim, b, rows: np.ndarray) -> None:
+    """The owned `rows` of body `b` have just been damaged (at a step's start, after the
+    commit): their work taken W (committed damage state) becomes psi + w_p, so that their
+    damage work starts at zero and counts only what the damaged stress does differently;
+    the integration error of W against the law's energies before (trapezoidal rule against
+    the law's own increments) does not enter the balance, as for a body without damage."""
+    sim.damage_state(b)[0][rows, damage.WORK] = law_work(sim, b, rows)

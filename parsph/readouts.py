@@ -6,9 +6,12 @@ obstacles' forces.
 
 from __future__ import annotations
 
+import difflib
+
 import numpy as np
 
 from parsph import fields, materials, quantities
+from parsph.errors import InputError
 from parsph.exact_sum import allsum
 from parsph.formulations import tlsph
 from parsph.materials import update
@@ -23,7 +26,10 @@ def quantity(sim, name: str, sel: np.ndarray | None = None) -> np.ndarray:
         return q.compute(sim, sel)
     if fields.known(name) and fields.get(name).units is not None:  # a registered field
         return sim.particles.arrays[name][sel]
-    raise ValueError(name)
+    known = quantities.snapshot_names()
+    close = difflib.get_close_matches(str(name), known, n=1)
+    raise InputError(f"unknown quantity {name!r}{f' (did you mean {close[0]!r}?)' if close else ''}; the known "
+                     f"ones: {', '.join(known)}")
 
 
 def quadrature(sim) -> tuple:

@@ -129,7 +129,7 @@ def test_each_body_has_its_material_and_formulation():
     (lambda raw: raw["bodies"][0]["material"].pop("density"), "missing required key 'bodies[0].material.density'"),
     (lambda raw: raw["bodies"][1]["material"].update(shear_modulus=1.0),
      "bodies[1].material.shear_modulus does not apply"),
-    (lambda raw: raw.update(geometry={"parts": []}), "remove geometry.parts"),
+    (lambda raw: raw.update(geometry={"parts": [{"shape": "box"}]}), "remove geometry.parts"),
 ])
 def test_bad_bodies_are_refused_naming_the_key(change, message):
     raw = copy.deepcopy(_raw())

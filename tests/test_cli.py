@@ -17,7 +17,7 @@ from typing import Callable
 
 import pytest
 
-from conftest import BAR, CEILING, ROOT, RUNS, parsph
+from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph
 
 
 # A small 2D scene (random particles in a patch) for the "zero particles" count.
@@ -50,6 +50,83 @@ n = 10
 [[{kind}]]
 {type}group = "right_quarter"
 expression = ["{text}"]
+"""
+# two bars side by side in contact, the right one possibly rigid (1D: the bar's lattice)
+TWO_BARS = """\
+[scene]
+name = "two_bars"
+dimension = 1
+[geometry]
+area = 1.0e-4
+[kernel]
+type = "cubic_spline"
+support = 1.5
+[[bodies]]
+name = "left"
+[[bodies.parts]]
+shape = "box"
+lower = [0.0]
+upper = [0.1]
+spacing = 0.01
+[bodies.material]
+model = "saint_venant_kirchhoff"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.0
+[[bodies]]
+name = "right"
+rigid = false
+[[bodies.parts]]
+shape = "box"
+lower = [0.1]
+upper = [0.2]
+spacing = 0.01
+[bodies.material]
+model = "saint_venant_kirchhoff"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.0
+[[contact]]
+bodies = ["left", "right"]
+[groups.right]
+box = { lower = [0.1], upper = [0.2] }
+[time]
+end = 1.0e-4
+"""
+BAR_MATERIAL = """[material]
+model = "saint_venant_kirchhoff"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.0
+"""
+J2_FAILURE = """[material]
+model = "j2_plasticity"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.0
+yield_stress = 5.0e8
+hardening_modulus = 0.0
+jc_d1 = 0.5
+"""
+JOHNSON_COOK = """[material]
+model = "johnson_cook"
+density = 8960.0
+youngs_modulus = 124.0e9
+poisson_ratio = 0.34
+jc_a = 90.0e6
+jc_b = 292.0e6
+jc_n = 0.31
+room_temperature = 298.0
+melting_temperature = 1356.0
+specific_heat = 383.0
+"""
+MIE_GRUNEISEN = """[material]
+model = "mie_gruneisen"
+density = 8930.0
+shear_modulus = 48.0e9
+sound_speed = 3940.0
+hugoniot_slope = 1.49
+gruneisen_gamma = 2.0
 """
 RUN_FILES = ("history.h5", "snapshots.h5", "snapshots.xdmf", "scene.json")
 RANKS = [pytest.param(1, id="1rank"), pytest.param(2, id="2ranks", marks=pytest.mark.mpi)]
@@ -84,6 +161,25 @@ class Case:
 
 def scene(text):
     return lambda tmp: write(tmp, text)
+
+
+def material(block: str, old: str = "", new: str = "") -> Callable[[Path], Path]:
+    """The bar scene with the [material] `block` (its `old` line replaced by `new`)."""
+    return scene(edit(BAR_MATERIAL, edit(old, new, block) if old else block))
+
+
+def two_bars(old: str, new: str) -> Callable[[Path], Path]:
+    """TWO_BARS with `old` replaced by `new`."""
+    return scene(edit(old, new, TWO_BARS))
+
+
+def rigid_right(material_line: str = "", extra: str = "") -> Callable[[Path], Path]:
+    """TWO_BARS with the right bar rigid, its material's last line followed by
+    `material_line`, and `extra` at the end."""
+    text = edit("rigid = false", "rigid = true", TWO_BARS)
+    if material_line:
+        text = edit("poisson_ratio = 0.0\n[[contact]]", f"poisson_ratio = 0.0\n{material_line}\n[[contact]]", text)
+    return scene(text + extra)
 
 
 def probe(name: str, expect: list, two_ranks: bool = True) -> Case:
@@ -191,10 +287,52 @@ BAD_INPUT = {
     "hourglass-stiffness-overflows": Case(
         scene(edit("hourglass = 0.0", "hourglass = 1e300")),
         ["formulation.hourglass = 1e+300", "hourglass stiffness of particle", "overflows"], build=True),
+    # constants that are numbers but nonsense: refused with the key and its range
+    "johnson-cook-failure-d1-negative": Case(
+        material(J2_FAILURE, "jc_d1 = 0.5", "jc_d1 = -0.5"),
+        ["material.jc_d1 + jc_d2 = -0.5 must be > 0", "would fail at once"]),
+    "johnson-cook-failure-d1-negative-with-d3": Case(
+        material(J2_FAILURE, "jc_d1 = 0.5", "jc_d1 = -2.2\njc_d2 = 5.43\njc_d3 = -0.47"),
+        ["material.jc_d1 = -2.2 must be >= 0 with jc_d3 = -0.47", "triaxialities sigma* above 1.92"],
+        two_ranks=False),
+    "johnson-cook-failure-d4-negative": Case(
+        material(J2_FAILURE, "jc_d1 = 0.5", "jc_d1 = 0.5\njc_d4 = -100.0"), ["material.jc_d4 must be >= 0"]),
+    "johnson-cook-failure-d5-below-minus-one": Case(
+        material(J2_FAILURE, "jc_d1 = 0.5", "jc_d1 = 0.5\njc_d5 = -1.0"), ["material.jc_d5 must be > -1.0"],
+        two_ranks=False),
+    "specific-heat-tiny": Case(
+        material(JOHNSON_COOK, "specific_heat = 383.0", "specific_heat = 1e-300"),
+        ["material.specific_heat must be in [10.0, 100000.0]", "1e-300"]),
+    "hugoniot-slope-huge": Case(
+        material(MIE_GRUNEISEN, "hugoniot_slope = 1.49", "hugoniot_slope = 1e6"),
+        ["material.hugoniot_slope must be in [0.0, 5.0]"]),
+    "contact-radius-tiny": Case(
+        two_bars('bodies = ["left", "right"]', 'bodies = ["left", "right"]\nradius = 1e-300'),
+        ["contact[0].radius must be > 0.5", "1e-300"]),
+    "contact-stiffness-tiny": Case(
+        two_bars('bodies = ["left", "right"]', 'bodies = ["left", "right"]\nstiffness = 1e-300'),
+        ["contact[0].stiffness must be in [0.01, 10000.0]", "1e-300"]),
+    "failure-of-a-rigid-body": Case(
+        rigid_right("failure_strain = 0.1"), ["bodies[1].material.failure_strain: body 'right' is rigid"]),
+    "broken-pairs-of-a-rigid-body": Case(
+        rigid_right("break_pairs = true"), ["bodies[1].material.break_pairs: body 'right' is rigid"], two_ranks=False),
+    "condition-stretching-a-rigid-body": Case(
+        rigid_right(extra='[[bc]]\ntype = "displacement"\ngroup = "right"\nexpression = ["0.1 * (x - 0.1)"]\n'),
+        ["bc[0] gives the particles of rigid body 'right' different values"], build=True),
     "skin-beyond-two-supports": Case(
         scene(edit('type = "tlsph"', 'type = "sph"\nkernel = "eulerian"\nskin = 1e300')),
         ["formulation.skin", "must be in [0.0, 2.0]"]),
 }
+
+
+@pytest.mark.parametrize("text", [
+    TWO_BARS, edit("rigid = false", "rigid = true", TWO_BARS), edit(BAR_MATERIAL, J2_FAILURE),
+    edit(BAR_MATERIAL, JOHNSON_COOK), edit(BAR_MATERIAL, MIE_GRUNEISEN)], ids=["two-bars", "two-bars-rigid",
+                                                                            "j2-failure", "johnson-cook", "mie-gruneisen"])
+def test_the_scenes_the_cases_edit_are_valid(text):
+    from parsph.api import load_scene
+
+    assert load_scene(text)["scene"]["name"]
 
 
 def assert_bad_input(proc, expect: list[str]) -> None:
@@ -319,6 +457,45 @@ def test_overwrite_keeps_previous_run_when_new_scene_is_bad(tmp_path):
     assert snapshot_files(out) == before
 
 
+# ------------------------------------------------------------------ plot
+@pytest.fixture(scope="module")
+def bar_output(tmp_path_factory):
+    """A short run of the bar with three snapshots."""
+    folder = tmp_path_factory.mktemp("plot")
+    proc = parsph(["run", write(folder, BAR), "--out", folder / "run", "--quiet", "--set", "time.end=2e-4",
+                   "--set", "output.snapshot_interval=1e-4"])
+    assert proc.returncode == 0, proc.stderr
+    return folder / "run"
+
+
+PLOT_REFUSALS = {  # name: (the arguments after `plot`, given the run's directory; expected stderr parts)
+    "frames-negative": (lambda run: [run / "snapshots.h5", "--frames", "-3"], ["--frames = -3", "at least 1"]),
+    "frames-zero": (lambda run: [run / "snapshots.h5", "--frames", "0"], ["--frames = 0", "at least 1"]),
+    "limits-reversed": (lambda run: [run / "snapshots.h5", "--limits", "1", "0"], ["--limits 1 0", "LOW < HIGH"]),
+    "frames-of-a-history": (lambda run: [run / "history.h5", "--frames", "2"], ["apply to a plot of snapshots"]),
+    "directory": (lambda run: [run], ["is a directory: give a run's history.h5 or snapshots.h5"]),
+    "toml-file": (lambda run: [RUNS / "bar1d.toml"], ["bar1d.toml cannot be read: it is not an HDF5 file"]),
+    "output-in-a-missing-directory": (lambda run: [run / "history.h5", "-o", run / "missing" / "plot.png"],
+                                      ["the plot cannot be written to", "plot.png"]),
+    "output-under-a-file": (lambda run: [run / "history.h5", "-o", run / "scene.json" / "plot.png"],
+                            ["the plot cannot be written to", "plot.png"]),
+    "output-over-the-snapshots": (lambda run: [run / "history.h5", "-o", run / "snapshots.h5"],
+                                  ["snapshots.h5 must be a .png file"]),
+}
+
+
+@pytest.mark.parametrize("ranks", RANKS)
+@pytest.mark.parametrize("name", list(PLOT_REFUSALS))
+def test_plot_refuses_bad_input_and_keeps_the_run(bar_output, name, ranks):
+    from parsph.io import read_history, read_snapshots
+
+    args, expect = PLOT_REFUSALS[name]
+    proc = parsph(["plot", *args(bar_output)], ranks=ranks)
+    assert_bad_input(proc, expect)
+    assert not list(bar_output.rglob("*.png")), "a refused plot wrote a file"
+    assert len(read_snapshots(bar_output)) == 3 and len(read_history(bar_output)["time"]) > 1
+
+
 # ------------------------------------------------------------------ check, info, run
 @pytest.mark.parametrize("ranks", RANKS)
 def test_check_prints_resolved_scene(ranks):
@@ -402,3 +579,32 @@ def test_run_two_ranks_writes_finite_history(tmp_path):
     assert series["step"][-1] == 50
     assert series["kinetic_energy"][0] > 0  # the right quarter starts at 5 m/s
     assert series["tip_displacement"][-1] > 0  # ... and moves right
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity on this system")
+def test_more_ranks_than_cores_get_one_warning(tmp_path):
+    """Two ranks allowed one core between them (their CPU affinity): rank 0 warns once that
+    they slow each other down and to run fewer; the run goes on. With a core each (if the
+    machine has two) there is no warning."""
+    import subprocess
+    import sys
+
+    cores = sorted(os.sched_getaffinity(0))
+
+    def run(allowed):
+        cmd = [mpiexec(), "-n", "2", sys.executable, "-m", "parsph", "run", str(RUNS / "bar1d.toml"), "--out",
+               str(tmp_path / f"cores_{len(allowed)}"), "--quiet", "--set", "time.max_steps=2"]
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                              preexec_fn=lambda: os.sched_setaffinity(0, allowed))
+
+    proc = run(cores[:1])
+    assert proc.returncode == 0, proc.stderr
+    warning = "parsph: warning: 2 ranks share 1 core(s) on a node"
+    assert proc.stderr.count(warning) == 1 and proc.stderr.count("warning") == 1, proc.stderr
+    assert "busy-polling" in proc.stderr and "run fewer ranks (-n 1)" in proc.stderr, proc.stderr
+    assert "parsph: scene" in proc.stdout
+    if len(cores) >= 2:
+        proc = run(cores[:2])
+        assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr

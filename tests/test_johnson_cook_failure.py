@@ -234,3 +234,29 @@ def test_a_pulled_bar_breaks_where_its_plastic_strain_reached_the_strain_to_frac
     assert abs(h["probe"][late].mean()) < 0.1 * peak["force"]
     # balance (measured 9e-5 of the work done)
     assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-3 * h["external_work"].max()
+
+
+def test_damage_work_is_zero_until_a_particle_fails():
+    """The pulled bar up to 2.5e-5 s, before its first particle fails (3.0e-5 s): yielding
+    particles near failure (index above 0.5) have taken no damage work, and every energy of
+    the history is the same, bit for bit, as without the failure model (the law's stress is
+    untouched, and the trapezoidal rule's difference from the law's own energies is not
+    damage work)."""
+    with_failure = run_until(simulation(BAR), 2.5e-5, every=10, probe=lambda s: s.quantity("failure_index").max())
+    plain = BAR.replace("jc_d1 = 0.05\njc_d2 = 0.5\njc_d3 = -1.5\nbreak_pairs = true\n", "")
+    without = run_until(simulation(plain), 2.5e-5, every=10)
+    assert 0.5 < with_failure["probe"][-1] < 1.0 and with_failure["plastic_work"][-1] > 0.0
+    assert np.all(with_failure["damage_work"] == 0.0)
+    for name in ("kinetic_energy", "strain_energy", "plastic_work", "total_energy"):
+        assert np.array_equal(with_failure[name], without[name]), name
+
+
+def test_the_copper_rod_with_johnson_and_cooks_failure_constants_takes_no_damage_work():
+    """runs/taylor_jc at 8 layers with copper's failure constants (COPPER) to 5 us: the foot
+    yields and its index grows, no particle fails, and the damage work is 0 in every row
+    (it read -0.41 J, the trapezoidal rule's difference from the law's plastic work)."""
+    constants = [f"material.{k}={COPPER[k]}" for k in ("jc_d1", "jc_d2", "jc_d3", "jc_d4", "jc_d5")]
+    h = run_until(simulation("taylor_jc", ["parameters.layers=8", *constants]), 5e-6, every=10,
+                  probe=lambda s: s.quantity("failure_index").max())
+    assert h["plastic_work"][-1] > 0.0 and 0.1 < h["probe"][-1] < 1.0
+    assert np.all(h["damage_work"] == 0.0)

@@ -126,6 +126,18 @@ def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
         assert f["time"][-1] >= 0.4
 
 
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
+def test_restart_refusal_names_the_changed_keys_of_bodies_and_contact(tmp_path, ranks):
+    out = tmp_path / "run"
+    run(out, ranks, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10", scene="bars_impact")
+    proc = parsph(["run", RUNS / "bars_impact.toml", "--out", out, "--restart", "latest", *PATCH,
+                   "--set", "contact.0.stiffness=2.0", "--set", "bodies.1.material.density=7000.0"], ranks=ranks)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.count("parsph: error") == 1, proc.stderr
+    assert "differs from checkpoint" in proc.stderr
+    assert "in bodies.1.material.density, contact.0.stiffness;" in proc.stderr, proc.stderr
+
+
 @pytest.mark.parametrize("ranks", [1, pytest.param(3, marks=pytest.mark.mpi)])
 def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path, ranks):
     """The ranks hash the file's chunks among them: a changed last velocity (the end of the

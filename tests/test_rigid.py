@@ -236,6 +236,33 @@ def test_a_rigid_body_held_by_a_condition_moves_as_it_says_and_a_part_cannot_be_
         simulation(empty)
 
 
+@pytest.mark.parametrize(("extra", "message"), [
+    ('[[bc]]\ntype = "displacement"\ngroup = "disk"\nexpression = ["0.1 * (x - 0.01)", "0"]\nramp = 1e-4\n',
+     r"bc\[0\] gives the particles of rigid body 'disk' different values"),
+    ('[[bc]]\ntype = "velocity"\ngroup = "disk"\nexpression = ["100 * (x - 0.01)", "0"]\n',
+     r"bc\[0\] gives the particles of rigid body 'disk' different values"),
+    ('[[initial]]\ntype = "displacement_gradient"\ngroup = "disk"\ngradient = [[0.1, 0.0], [0.0, 0.0]]\n',
+     r"an \[\[initial\]\] displacement moves the particles of rigid body 'disk'"),
+    ('[[initial]]\ntype = "displacement_field"\ngroup = "disk"\nexpression = ["1e-4", "0"]\n'
+     '[[bc]]\ntype = "velocity"\ngroup = "disk"\nvalue = [0.0, -2.0]\n', None),
+    ('[[initial]]\ntype = "displacement_field"\ngroup = "disk"\nexpression = ["1e-4 * x", "0"]\n'
+     '[[bc]]\ntype = "velocity"\ngroup = "disk"\nvalue = [0.0, -2.0]\n',
+     r"an \[\[initial\]\] displacement moves the particles of rigid body 'disk'"),
+], ids=["bc-displacement-field", "bc-velocity-field", "initial-stretch", "initial-shift-held", "initial-stretch-held"])
+def test_conditions_that_would_deform_a_rigid_body_are_refused(extra, message):
+    """A [[bc]] with an expression of position (a stretch), or an initial displacement of a
+    free rigid body or an uneven one of a held body, is refused; a held body shifted evenly
+    moves on rigidly."""
+    if message is None:
+        sim = simulation(DISK + extra)
+        sim.step()
+        u = sim.quantity("displacement", disk_particles(sim))
+        assert np.ptp(u, axis=0).max() == 0.0 and u[0, 0] == 1e-4
+        return
+    with pytest.raises(InputError, match=message):
+        simulation(DISK + extra)
+
+
 @pytest.mark.mpi
 def test_rigid_body_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     """The spinning disk striking the block (touching from step ~60): the same history and

@@ -293,17 +293,27 @@ def load(spec: str, out_dir: str, comm) -> dict:
 
 
 def differing_keys(old: dict, new: dict, prefix: str = "") -> list:
-    """Keys whose values differ between two resolved scenes (lists compared whole; a key
-    absent from one and empty or None in the other does not differ)."""
+    """Keys whose values differ between two resolved scenes, as --set names them
+    (`bodies.1.material.density`): arrays of tables of the same length compared entry by
+    entry, other lists whole; a key absent from one and empty or None in the other does not
+    differ."""
     keys = []
     for k in sorted(set(old) | set(new)):
         path = f"{prefix}{k}"
         a, b = old.get(k), new.get(k)
         if isinstance(a, dict) and isinstance(b, dict):
             keys += differing_keys(a, b, path + ".")
+        elif _tables(a) and _tables(b) and len(a) == len(b):
+            for i, (x, y) in enumerate(zip(a, b)):
+                keys += differing_keys(x, y, f"{path}.{i}.")
         elif a != b and (a or b):  # an absent list and an empty one are the same
             keys.append(path)
     return keys
+
+
+def _tables(value) -> bool:
+    """Whether `value` is an array of tables ([[bodies]], [[contact]], ...)."""
+    return isinstance(value, list) and bool(value) and all(isinstance(x, dict) for x in value)
 
 
 def physics_changes(old_scene: dict, scene: dict) -> list:

@@ -13,9 +13,12 @@ crushed by its neighbours until the stable step collapsed); its law is no longer
 
 The degraded stress derives from no energy, so the loop keeps the work each point has
 taken, W = int P : dF (trapezoidal rule, per unit reference volume), and reports the
-difference to the law's strain energy, W - psi, as damage work (all of W once the point
-has failed: its strain energy is then reported as 0); strain energy + damage work is the
-work the point has taken, and the balance of the run stays checkable.
+difference to the law's strain energy (and plastic work), W - psi, as damage work (all of
+W once the point has failed: its strain energy is then reported as 0); strain energy +
+damage work is the work the point has taken, and the balance of the run stays checkable.
+W starts at psi when the point is first damaged (parsph.ledger.start_damage_work): an
+intact point takes no damage work, whatever the trapezoidal rule's difference from the
+law's energy.
 
 The state row (committed; the stress evaluation writes the trial row): D, the failure
 index (here the largest principal strain at the last evaluation; Johnson-Cook's D:

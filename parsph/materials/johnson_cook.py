@@ -163,7 +163,8 @@ KEYS = dict(  # the flow stress's (besides the elastic constants)
     reference_strain_rate=Key("float", None, positive, "johnson_cook: eps_dot_0 (default 1) [1/s]"),
     room_temperature=Key("float", None, positive, "johnson_cook: T_room, the initial temperature [K]"),
     melting_temperature=Key("float", None, positive, "johnson_cook: T_melt [K]"),
-    specific_heat=Key("float", None, positive, "johnson_cook: c_p [J/(kg K)]"),
+    specific_heat=Key("float", None, in_range(10.0, 1.0e5), "johnson_cook: c_p [J/(kg K)] (solids and liquids: "
+                      "about 100 to 4200; outside [10, 1e5] a unit is wrong)"),
     taylor_quinney=Key("float", None, in_range(0.0, 1.0), "johnson_cook: beta, the share of plastic "
                        "work turned to heat (Taylor-Quinney; default 0.9)"))
 OPTIONAL = ("jc_c", "jc_m", "reference_strain_rate", "taylor_quinney")

@@ -13,6 +13,13 @@ step. A point fails when D reaches 1: its damage (materials.damage) becomes 1, i
 no stress from then on, and, with material.break_pairs, loses its pairs. Before that its
 stress is the law's: the model does not soften.
 
+The constants must keep eps_f positive wherever a yielding point can be: at any
+triaxiality (its mean stress over its flow stress, unbounded under high pressure or
+tension), any rate from eps_dot_0 on and T* in [0, 1]; else every point that yields there
+fails at once. So D2 >= 0, D4 >= 0, D5 > -1, D1 + D2 > 0 and, unless D3 = 0, D1 >= 0
+(Johnson & Cook's Armco iron, D1 = -2.20, D3 = -0.47, is refused: its eps_f is negative
+beyond sigma* = 1.92, which a spalling plate reaches).
+
 The index is kept in the damage state's STRAIN column (the tensile model's largest
 principal strain): the evaluation writes D + d_eps / eps_f to the trial row, the commit
 fails the points whose committed index has reached 1 (`fail`).
@@ -26,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from parsph.errors import InputError
-from parsph.keys import Key
+from parsph.keys import Key, greater_than, non_negative
 from parsph.materials import damage
 from parsph.materials.elastoplastic import PLASTIC_STRAIN, PLASTIC_WORK
 from parsph.materials.law import FailureModel
@@ -39,11 +46,13 @@ KIRCHHOFF = 5  # the scratch matrix where the plastic laws leave their full Kirc
 
 KEYS = dict(
     jc_d1=Key("float", None, None, "Johnson-Cook failure (1985): D1 of the strain to fracture; giving it enables "
-              "the model (plastic laws: j2, johnson_cook, mie_gruneisen)"),
-    jc_d2=Key("float", None, None, "Johnson-Cook failure: D2 (default 0)"),
+              "the model (plastic laws: j2, johnson_cook, mie_gruneisen); D1 + D2 > 0, and D1 >= 0 unless D3 = 0"),
+    jc_d2=Key("float", None, non_negative, "Johnson-Cook failure: D2 (default 0)"),
     jc_d3=Key("float", None, None, "Johnson-Cook failure: D3, of the triaxiality (default 0)"),
-    jc_d4=Key("float", None, None, "Johnson-Cook failure: D4, of the strain rate (default 0)"),
-    jc_d5=Key("float", None, None, "Johnson-Cook failure: D5, of the temperature (default 0)"),
+    jc_d4=Key("float", None, non_negative, "Johnson-Cook failure: D4, of the strain rate (default 0; >= 0: "
+              "1 + D4 ln(rate) stays positive at every rate)"),
+    jc_d5=Key("float", None, greater_than(-1.0), "Johnson-Cook failure: D5, of the temperature (default 0; > -1: "
+              "1 + D5 T* stays positive up to the melting point)"),
 )
 
 
@@ -108,10 +117,21 @@ def stresses(P: np.ndarray, F: np.ndarray, dim: int, state: np.ndarray) -> None:
 
 def check(path: str, material: dict, law) -> None:
     """Over a plastic law, whose state holds the plastic strain and work where the
-    elasto-plastic laws keep them."""
+    elasto-plastic laws keep them; D1 + D2 exp(D3 sigma*) positive at every triaxiality
+    (the module's rule; the keys' checks hold the other constants to it)."""
     if law.plastic is None or (law.plastic.strain, law.plastic.work) != (PLASTIC_STRAIN, PLASTIC_WORK):
         raise InputError(f"{path}.jc_d1: Johnson-Cook failure accumulates plastic strain and applies to the "
                          f"plastic laws, not to model '{law.name}' (it has no plastic strain)")
+    d1, d2, d3 = (material[k] or 0.0 for k in ("jc_d1", "jc_d2", "jc_d3"))
+    if d1 + d2 <= 0.0:
+        raise InputError(f"{path}.jc_d1 + jc_d2 = {d1 + d2:g} must be > 0: it is the strain to fracture at "
+                         "triaxiality 0, where every point that yields would fail at once")
+    if d1 < 0.0 and d3 != 0.0:
+        edge = math.log(-d1 / d2) / d3
+        raise InputError(f"{path}.jc_d1 = {d1:g} must be >= 0 with jc_d3 = {d3:g}: the strain to fracture "
+                         f"D1 + D2 exp(D3 sigma*) is not positive at triaxialities sigma* {'above' if d3 < 0 else 'below'} "
+                         f"{edge:.3g} (a yielding point's mean stress over its flow stress, unbounded under pressure "
+                         "or tension), where every point that yields would fail at once")
 
 
 def _index(state: np.ndarray, body) -> np.ndarray:

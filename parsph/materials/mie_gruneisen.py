@@ -26,7 +26,7 @@ from numba import njit
 
 from parsph.errors import InputError
 from parsph.fields import Field, register
-from parsph.keys import Key, non_negative, positive
+from parsph.keys import Key, in_range, non_negative, positive
 from parsph.materials import johnson_cook
 from parsph.materials.elastic import SHEAR_MODULUS
 from parsph.materials.elastoplastic import (COLUMNS, PLASTIC_STRAIN, PLASTIC_WORK, READOUTS, YIELD_STRESS, corrector,
@@ -148,7 +148,8 @@ LAW = Law(
     "mie_gruneisen", MIE_GRUNEISEN,
     {"shear_modulus": SHEAR_MODULUS,
      "sound_speed": Key("float", None, positive, "mie_gruneisen: c0 of U_s = c0 + s u_p, the bulk sound speed [m/s]"),
-     "hugoniot_slope": Key("float", None, non_negative, "mie_gruneisen: s of U_s = c0 + s u_p"),
+     "hugoniot_slope": Key("float", None, in_range(0.0, 5.0), "mie_gruneisen: s of U_s = c0 + s u_p (solids and "
+                           "liquids: about 0.5 to 3, K' = 4 s - 1; the Hugoniot's pole is at 1 - J = 1 / s)"),
      "gruneisen_gamma": Key("float", None, non_negative, "mie_gruneisen: Gamma0, Grüneisen's coefficient"),
      "yield_stress": YIELD_STRESS,
      **johnson_cook.KEYS},

@@ -9,6 +9,7 @@ ends the whole job at once through `MPI.Abort`, so no rank is left waiting in a 
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import time
 
@@ -36,6 +37,34 @@ def say(*args, **kwargs) -> None:
 def warn(message: str) -> None:
     if COMM.rank == 0:
         print(f"parsph: warning: {message}", file=sys.stderr, flush=True)
+
+
+def warn_if_oversubscribed(comm=COMM) -> None:
+    """Warn (rank 0, one line) when the ranks on a node outnumber the cores they may run on
+    (the union of their CPU affinity sets; ranks per node from MPI's shared-memory split):
+    waiting ranks busy-poll, so such ranks take each other's cores (collective)."""
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    try:
+        cores = len(set().union(*node.allgather(_cores())))
+        ranks, leader = node.size, node.rank == 0
+    finally:
+        node.Free()
+    crowded = comm.gather((ranks, cores) if leader and ranks > cores else None, root=0)
+    nodes = comm.allreduce(int(leader))
+    if comm.rank == 0 and any(crowded):
+        ranks, cores = next(c for c in crowded if c)
+        fewer = f"-n {cores}" if nodes == 1 else f"at most {cores} ranks on that node"
+        warn(f"{ranks} ranks share {cores} core(s) on a node: MPI ranks wait for each other by busy-polling "
+             "(MPICH does), so ranks that outnumber the cores slow each other down by orders of magnitude; "
+             f"run fewer ranks ({fewer})")
+
+
+def _cores() -> set:
+    """The cores this process may run on."""
+    try:
+        return os.sched_getaffinity(0)
+    except AttributeError:  # no affinity on this system
+        return set(range(os.cpu_count() or 1))
 
 
 @contextlib.contextmanager
