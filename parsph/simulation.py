@@ -251,6 +251,8 @@ class Simulation:
     # ----------------------------------------------------------------- the public read-outs
     def group_index(self, name: str) -> np.ndarray:
         """The owned particles of group `name` (rows)."""
+        if name not in self.groups:
+            raise ParsphError(f"unknown group '{name}'; the scene's groups: {', '.join(sorted(self.groups))}")
         return np.flatnonzero(self.groups[name])
 
     def quantity(self, name: str, sel: np.ndarray | None = None) -> np.ndarray:

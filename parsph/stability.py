@@ -37,7 +37,7 @@ class StableStep:
             self.cfl_at = (settings["cfl"] * self.limit(sim)[0], sim.step_count)
         self.dt = clock["dt"] if clock else self.next_step(sim)[0]
         self.first = clock.get("first_stable", 0.0) if clock else self.limit(sim)[0]
-        self.floor = settings["step_floor"] * self.first
+        self.floor = settings["step_floor"] * self.first if self.first < math.inf else 0.0
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
         self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.topology.strain > 0)
 
@@ -76,6 +76,8 @@ class StableStep:
         reduced = np.array([-dt, strain])
         if sim.comm.size > 1:
             sim.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
+        if -reduced[0] == math.inf and self.settings["dt"] > 0:  # nothing bounds a fixed step: it is the user's
+            return math.inf, reduced[1]
         if -reduced[0] == math.inf:
             why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in sim.bodies)
                    else "every particle has failed completely (damage 1) and carries no stress; the run is stopped, "
@@ -98,13 +100,17 @@ class StableStep:
     def collapsed(self, sim, step: float, dt: float, smallest: int) -> ParsphError:
         """The error for a step that has collapsed (below the floor, or zero), naming the
         particle that sets it and, if it touches another body, both bodies (collective)."""
-        touching = None
+        touching, speed = None, None
         if smallest >= 0 and sim.contact is not None:
             touching = sim.contact.partner(smallest)
+        if smallest >= 0 and len(sim.step_limit) and not sim.step_limit[smallest] > dt:  # its motion sets it
+            v = sim.v[smallest]
+            top = float(np.abs(v).max())
+            speed = top * float(np.sqrt(np.sum((v / top) ** 2))) if 0.0 < top < np.inf else top  # no overflow
         mine = [] if smallest < 0 else [(dt, int(sim.gid[smallest]),
                                          tuple((sim.X[smallest] + sim.u[smallest]).tolist()),
-                                         int(sim.body[smallest]), touching)]
-        _, gid, x, body, touching = min(c for part in sim.comm.allgather(mine) for c in part)
+                                         int(sim.body[smallest]), touching, speed)]
+        _, gid, x, body, touching, speed = min(c for part in sim.comm.allgather(mine) for c in part)
         where = ", ".join(f"{c:.6g}" for c in x)
         if not step > 0.0:
             what = "collapsed to zero"
@@ -112,7 +118,11 @@ class StableStep:
             what = (f"fell to {step:.3g} s, below time.step_floor = {self.settings['step_floor']:g} of the first "
                     f"one ({self.first:.3g} s),")
         names = [b.name for b in sim.bodies]
-        if touching is not None:
+        if speed is not None:
+            why = (f"of body '{names[body]}' moves at {speed:.3g} m/s, and the step in which it closes in on another "
+                   f"body or moves a quarter of the contact skin has collapsed: check the initial velocities and "
+                   f"loads")
+        elif touching is not None:
             other, other_body, ratio = touching
             why = (f"of body '{names[body]}' is at {ratio:.3g} of the contact distance from particle {other} of body "
                    f"'{names[other_body]}': the contact between '{names[body]}' and '{names[other_body]}' has "
@@ -132,7 +142,7 @@ class StableStep:
         dt = self.settings["dt"]
         if dt == 0:
             return "reduce time.cfl, raise formulation.hourglass or refine the particles"
-        cfl = "" if self.cfl_at is None else \
+        cfl = "" if self.cfl_at is None or self.cfl_at[0] == math.inf else \
             " (the CFL step, time.cfl times the stable step, was {:.3g} s at step {})".format(*self.cfl_at)
         return f"reduce time.dt = {dt:.3g} s{cfl}, raise formulation.hourglass or refine the particles"
 

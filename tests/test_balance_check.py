@@ -259,3 +259,57 @@ def test_machdyn_viscous_hourglass_dampers_do_not_feed_energy_into_a_coarse_rod(
     h = run_until(sim, 8e-5, every=100)
     assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-2 * h["kinetic_energy"][0]
     assert h["hourglass_energy"][-1] > 0.0  # the dampers' work, absorbed
+
+
+RIGID_ONLY = """
+[scene]
+name = "rigid_only"
+dimension = 2
+[[bodies]]
+name = "disk"
+rigid = true
+[[bodies.parts]]
+shape = "disk"
+center = [0.0, 0.01]
+radius = 0.005
+spacing = 1.0e-3
+[bodies.material]
+model = "neo_hookean"
+density = 7800.0
+youngs_modulus = 2.0e11
+poisson_ratio = 0.3
+[[initial]]
+type = "velocity"
+value = [0.0, -50.0]
+[[walls]]
+point = [0.0, 0.0]
+normal = [0.0, 1.0]
+[time]
+end = 4.0e-4
+dt = 1.0e-6
+"""
+
+
+def test_a_scene_of_rigid_bodies_alone_runs_with_a_fixed_step():
+    """A free rigid disk thrown at a wall, nothing else: no particle sets a stable step, so
+    the scene gives time.dt (it was refused with the advice to give it); the disk stops at
+    the wall, whose work is its kinetic energy."""
+    sim = simulation(RIGID_ONLY)
+    h = run_until(sim, 4e-4, every=50)
+    assert h["kinetic_energy"][-1] < 1e-12 * h["kinetic_energy"][0]
+    assert h["external_work"][-1] == pytest.approx(-h["kinetic_energy"][0], rel=1e-12)
+
+
+def test_a_body_thrown_beyond_reason_is_named_with_its_speed():
+    """A disk at 5e200 m/s: its step (a quarter of the contact skin at that speed) collapses
+    at once; the error names the body and the speed, not a flattened particle."""
+    from test_rigid import DISK
+
+    with pytest.raises(ParsphError, match=r"of body 'disk' moves at 5e\+200 m/s"):
+        simulation(DISK.replace("value = [1.0, -5.0]", "value = [1.0, -5.0e200]"))
+
+
+def test_an_unknown_group_is_named_with_the_known_ones():
+    sim = simulation(BAR)
+    with pytest.raises(ParsphError, match="unknown group 'nope'; the scene's groups: A, B, all, right_quarter"):
+        sim.group_index("nope")
