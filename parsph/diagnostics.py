@@ -25,6 +25,7 @@ from numba import njit
 
 from parsph import readouts
 from parsph.exact_sum import SCALE, Exact, totals
+from parsph.fields import MOMENT_COMPONENTS
 from parsph.balance import TERMS
 from parsph.rigid import moments
 
@@ -137,10 +138,10 @@ def global_parts(state, reduction: RowReduction):
     start = reduction.add_sums([columns])
     n, A = state.n_owned, state.particles.arrays
     x = state.X[:n] + state.u[:n]
-    angular = A["internal_angular_impulse"][:n]
-    defects_at = reduction.add_sums([A["internal_impulse"][:n], angular.reshape(n, -1), state.mass[:n, None] * x,
+    turns = MOMENT_COMPONENTS[dim]  # the angular momentum's components
+    angular = A["internal_angular_impulse"][:n].reshape(n, turns)
+    defects_at = reduction.add_sums([A["internal_impulse"][:n], angular, state.mass[:n, None] * x,
                                   state.mass[:n] * np.einsum("na,na->n", x, x)])
-    turns = angular.reshape(n, -1).shape[1]
     terms = {t.key: [(reduction.add_sums(body), len(body)) for body in energies[t.key]] for t in TERMS}
     kinetic_at = reduction.add_sums([columns[b.lo:b.hi, 2:2 + dim] for b in bodies]) if len(bodies) > 1 else 0
     top = reduction.add_max([eta.max() if len(eta) else 0.0])

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 KINDS = ("scalar", "vector", "tensor", "point", "flags", "id", "state", "moment")
+MOMENT_COMPONENTS = {1: 0, 2: 1, 3: 3}  # of an axial vector (a moment) in 1D, 2D, 3D
 
 
 @dataclass(frozen=True)
@@ -53,7 +54,7 @@ class Field:
     def shape(self, dim: int) -> tuple:
         """Shape of one point's value ("flags" columns vary; not given here)."""
         if self.kind == "moment":  # an axial vector: none in 1D, out of plane in 2D
-            return {1: (0,), 2: (), 3: (3,)}[dim]
+            return () if dim == 2 else (MOMENT_COMPONENTS[dim],)
         return {"scalar": (), "id": (), "vector": (dim,), "point": (dim,), "tensor": (dim, dim),
                 "state": (self.columns,)}[self.kind]
 

@@ -21,7 +21,7 @@ from parsph.balance import TERMS
 from numba import njit
 
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
-from parsph.fields import Field, register
+from parsph.fields import MOMENT_COMPONENTS, Field, register
 from parsph.formulations import tlsph
 from parsph.materials import damage
 
@@ -127,6 +127,36 @@ class Ledger:
                            f_cd=sim.contact.dissipation.copy() if dissipating else None, external=self.external,
                            obstacles=None, internal=sim.internal_force, heating=sim.viscous_heating.copy())
 
+    def in_flight(self, sim) -> dict:
+        """The step's start values of the owned particles (begin, obstacles_moved), named
+        "ledger.KEY", to travel with them when a reference update inside the step (an
+        Eulerian kernel's search) repartitions them; {} between steps."""
+        if self._start is None:
+            return {}
+        per_particle = {"u", "force", "external", "internal"} | ({"f_hg"} if sim.hourglass else set()) | (
+            {"f_visc", "heating"} if sim.viscous else set())
+        out = {}
+        for key, value in self._start.items():
+            if key == "obstacles" and value is not None:
+                out.update({f"ledger.obstacles.{k}": part for k, part in enumerate(value)})
+            elif key in per_particle or (key in ("v", "f_cd") and value is not None):
+                out[f"ledger.{key}"] = value
+        return out
+
+    def land(self, fields: dict, n: int) -> None:
+        """Take back the step's start values (in_flight) from the repartitioned `fields` (the
+        owned rows first, n of them), removing them from it."""
+        names = [name for name in fields if name.startswith("ledger.")]
+        parts = {}
+        for name in names:
+            key, values = name[len("ledger."):], fields.pop(name)[:n]
+            if key.startswith("obstacles."):
+                parts[int(key.split(".")[1])] = values
+            else:
+                self._start[key] = values
+        if parts:
+            self._start["obstacles"] = tuple(parts[k] for k in sorted(parts))
+
     def obstacles_moved(self, sim, v_half: np.ndarray, u_drift: np.ndarray) -> None:
         """Keep the changes the obstacles made to the mid-step velocity v_half and the
         drifted displacement u_drift (parsph.walls)."""
@@ -159,7 +189,7 @@ class Ledger:
             self.add("external_work", np.where(sim.bcs.mask, 0.5 * sim.mass[:n, None] * (v * v - v_old * v_old), 0.0))
         A = sim.particles.arrays
         add_impulses(dt, start["internal"], sim.internal_force, sim.X[:n] + start["u"], sim.X[:n] + sim.u[:n],
-                     A["internal_impulse"], A["internal_angular_impulse"].reshape(len(sim.X), -1))
+                     A["internal_impulse"], A["internal_angular_impulse"].reshape(len(sim.X), MOMENT_COMPONENTS[sim.dim]))
         self._start = None
 
     @staticmethod

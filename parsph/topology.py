@@ -94,7 +94,7 @@ class Topology:
         """The reference update with a new decomposition: ownership, ghosts, neighbours
         (`moved`: the owned points of the other sets at their new reference, _moved)."""
         n = sim.n_owned
-        owned = dict(sim.particles.migrating(), **self._new_reference(sim))
+        owned = dict(sim.particles.migrating(), **self._new_reference(sim), **sim.ledger.in_flight(sim))
         # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
         sets = {name: dict(points.migrating(), Xr=moved[name], Fr=points.owned("F").copy())
                 for name, points in sim.sets.items()}
@@ -106,6 +106,7 @@ class Topology:
         with collective(sim.comm):
             local = localize(owned, sets, "Xr", sim.comm, self.skin) if sets else \
                 add_ghosts(owned, "Xr", sim.comm, skin=self.skin)
+        sim.ledger.land(local.fields, local.n_owned)  # the step's start, with its particles
         with self._failure(sim):
             state.adopt(sim, local)
         self.rule.searched(np.concatenate([sim.Xr[: sim.n_owned],
