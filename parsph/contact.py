@@ -163,17 +163,10 @@ class Contact:
         """Raise (every rank alike) the error naming both bodies if a particle of one has come
         within INSIDE of the contact distance of a particle of another: it is inside that body,
         which contact exists to prevent (collective)."""
-        mine = self.closest[self.mine]
-        lowest = float(mine.min()) if len(mine) else 1.0
-        if self.comm.size > 1:
-            lowest = self.comm.allreduce(lowest, op=MPI.MIN)
-        if lowest >= INSIDE:
+        found = self._closest(gid, body, None, INSIDE)
+        if found is None:
             return
-        found = []
-        if len(mine) and mine.min() == lowest:
-            i = int(self.mine[np.argmin(mine)])
-            found = [(int(gid[i]), int(body[i]), self.partner(i))]
-        first, first_body, (other, other_body, ratio) = min(c for part in self.comm.allgather(found) for c in part)
+        first, first_body, _, (other, other_body, ratio) = found
         error = ParsphError(
             f"bodies '{names[first_body]}' and '{names[other_body]}' are passing through each other at step {step}, "
             f"t = {t:.6g} s: particle {first} of '{names[first_body]}' is at {ratio:.3g} of the contact distance from "
@@ -186,17 +179,10 @@ class Contact:
     def check_apart(self, gid: np.ndarray, body: np.ndarray, x: np.ndarray, names: list) -> None:
         """At the start: refuse bodies in contact that overlap (two particles closer than 0.99
         of their contact distance), naming both and the closest pair (collective)."""
-        mine = self.closest[self.mine]
-        lowest = float(mine.min()) if len(mine) else 1.0
-        if self.comm.size > 1:
-            lowest = self.comm.allreduce(lowest, op=MPI.MIN)
-        if lowest >= 0.99:
+        found = self._closest(gid, body, x, 0.99)
+        if found is None:
             return
-        found = []
-        if len(mine) and mine.min() == lowest:
-            i = int(self.mine[np.argmin(mine)])
-            found = [(int(gid[i]), int(body[i]), tuple(x[i].tolist()), self.partner(i))]
-        first, first_body, at, (other, other_body, ratio) = min(c for part in self.comm.allgather(found) for c in part)
+        first, first_body, at, (other, other_body, ratio) = found
         where = ", ".join(f"{c:.6g}" for c in at)
         error = InputError(
             f"bodies '{names[first_body]}' and '{names[other_body]}' overlap at the start: particle {first} of "
@@ -205,6 +191,22 @@ class Contact:
             f"apart by at least {(1.0 - ratio) * 100:.3g} % of it, or lower contact.radius")
         error.agreed = True
         raise error
+
+    def _closest(self, gid: np.ndarray, body: np.ndarray, x: np.ndarray | None, below: float) -> tuple | None:
+        """(global id, body, position (if x is given), partner) of the particle of all ranks
+        closest to another body's over their contact distance if that is below `below`, else
+        None (collective: every rank gets the same)."""
+        mine = self.closest[self.mine]
+        lowest = float(mine.min()) if len(mine) else 1.0
+        if self.comm.size > 1:
+            lowest = self.comm.allreduce(lowest, op=MPI.MIN)
+        if lowest >= below:
+            return None
+        found = []
+        if len(mine) and mine.min() == lowest:
+            i = int(self.mine[np.argmin(mine)])
+            found = [(int(gid[i]), int(body[i]), None if x is None else tuple(x[i].tolist()), self.partner(i))]
+        return min(c for part in self.comm.allgather(found) for c in part)
 
     def partner(self, i: int) -> tuple | None:
         """(global id, body, distance over the contact distance) of owned particle i's closest
