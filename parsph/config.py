@@ -93,8 +93,8 @@ SECTIONS: dict[str, dict[str, Key]] = {
     "balance": {
         "energy": Key("float", None, non_negative,
                       "warn when the total energy drifts by more than this fraction of the largest energy "
-                      "the run has held (0 = no check; default 0.05, and no check for a scene with a body in "
-                      "kbm or rlm, whose forces are not the gradient of their energy)"),
+                      "the run has held (0 = no check; default 0.05, or 0.25 for a scene with a body in kbm "
+                      "or rlm, whose forces are not the gradient of their energy)"),
         "momentum": Key("float", 1e-3, non_negative,
                         "warn when the forces between particles change the momentum by more than this "
                         "fraction of sqrt(2 M E) (M the mass, E the largest energy), or the angular momentum "
