@@ -1,4 +1,4 @@
-"""The `parsph` command: run, check, info, plot.
+"""The `parsph` command: run, check, preview, keys, info, plot.
 
 Bad input ends with a one-line message and exit code 2 on every rank; any other failure on
 any rank ends all ranks (see parallel.runtime).
@@ -44,6 +44,10 @@ def _parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="validate a scene and print it resolved, with defaults")
     c.add_argument("scene")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    k = sub.add_parser("keys", help="print the scene keys: type, unit, default, allowed values and meaning")
+    k.add_argument("section", nargs="?",
+                   help="only this section and those under it, e.g. time, bc, geometry.parts.box, material.johnson_cook")
+    k.add_argument("--markdown", action="store_true", help="as Markdown (docs/scene-keys.md is the whole of it)")
     sub.add_parser("info", help="print the environment: versions, ranks, parallel HDF5, threads")
     pl = sub.add_parser("plot", help="plot history series or snapshot fields to PNG")
     pl.add_argument("file", help="a run's history.h5 or snapshots.h5 (told apart by what they hold)")
@@ -109,6 +113,13 @@ def main(argv=None) -> int:
             with collective():
                 scene = config.load(args.scene, args.set)
             say(json.dumps(scene, indent=2))
+        elif args.command == "keys":
+            from parsph import keyref
+            from parsph.parallel.runtime import collective
+
+            with collective():
+                reference = (keyref.markdown if args.markdown else keyref.text)(args.section)
+            say(reference, end="")
         elif args.command == "info":
             info()
         elif args.command == "plot":

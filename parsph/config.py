@@ -32,6 +32,8 @@ MATERIALS = tuple(LAWS)
 
 
 def snapshot_fields(v):
+    """names of particle quantities (those of probes.quantity, and rank, reference_position,
+    cauchy_stress, body, ...), position among them"""
     known = quantities.snapshot_names()
     unknown = [f for f in v if f not in known]
     if unknown:
@@ -40,6 +42,8 @@ def snapshot_fields(v):
 
 
 def probe_quantity(v):
+    """the name of a scalar or vector particle quantity (displacement, velocity, von_mises,
+    plastic_strain, ...)"""
     known = quantities.probe_names()
     return None if v in known else f"must be one of {', '.join(map(repr, known))}"
 
@@ -48,7 +52,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
     "scene": {
         "name": Key("str", REQUIRED, doc="short name of the scene"),
         "dimension": Key("int", REQUIRED, one_of(1, 2, 3), "1, 2 (plane strain) or 3"),
-        "description": Key("str", ""),
+        "description": Key("str", "", doc="what the scene is, in a sentence or two"),
         "source": Key("str", "", doc="paper and section the scene reproduces"),
         "expected": Key("str", "", doc="the outcome the scene must show"),
     },
@@ -58,12 +62,13 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "area": Key("float", 1.0, positive, "cross-section area in 1D [m^2]"),
     },
     "kernel": {
-        "type": Key("str", "wendland_c2", one_of(*KERNELS)),
+        "type": Key("str", "wendland_c2", one_of(*KERNELS), "the kernel function W"),
         "support": Key("float", 2.1, positive, "support radius / particle spacing"),
         "neighbours": Key("int", 0, non_negative, "if > 0: per-particle support for this many neighbours"),
     },
     "material": {
-        "model": Key("str", REQUIRED, one_of(*MATERIALS)),
+        "model": Key("str", REQUIRED, one_of(*MATERIALS),
+                      "the material law; its constants: parsph keys material.MODEL"),
         "density": Key("float", REQUIRED, positive, "reference density [kg/m^3]"),
         **LAW_KEYS,  # each law's constants (materials.LAWS)
         **FAILURE_KEYS,  # the failure models' (materials.FAILURES)
@@ -114,7 +119,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
         "history_every": Key("int", 10, positive, "steps between history rows if history_interval is 0"),
         "snapshot_interval": Key("float", 0.0, non_negative, "simulated time between snapshots; 0 = none but the last"),
         "snapshot_fields": Key("strlist", ["position", "displacement", "velocity", "J", "von_mises", "rank"],
-                              snapshot_fields),
+                              snapshot_fields, "the particle fields each snapshot holds"),
         "progress_seconds": Key("float", 5.0, positive, "seconds between progress lines when not on a terminal"),
         "checkpoint_interval": Key("float", 0.0, non_negative, "simulated time between checkpoints (0 = none)"),
         "checkpoint_every": Key("int", 0, non_negative, "steps between checkpoints (0 = none)"),
@@ -125,31 +130,40 @@ SECTIONS: dict[str, dict[str, Key]] = {
 # Shapes of geometry.parts and the keys each one takes.
 PART_KEYS: dict[str, dict[str, Key]] = {
     "box": {
-        "lower": Key("vector", REQUIRED), "upper": Key("vector", REQUIRED),
-        "spacing": Key("float", REQUIRED, positive),
-        "placement": Key("str", "cell", one_of("cell", "node")),
+        "lower": Key("vector", REQUIRED, doc="lower corner [m]"),
+        "upper": Key("vector", REQUIRED, doc="upper corner [m]"),
+        "spacing": Key("float", REQUIRED, positive, "lattice spacing; the box's sides are multiples of it [m]"),
+        "placement": Key("str", "cell", one_of("cell", "node"),
+                         "cell: a particle at each cell's centre; node: at the cells' corners, the "
+                         "boundary's volumes halved per axis on the boundary"),
     },
-    "random_patch": {
-        "lower": Key("vector", REQUIRED), "upper": Key("vector", REQUIRED),
-        "count": Key("int", REQUIRED, positive), "seed": Key("int", 0),
-        "lloyd_iterations": Key("int", 20, non_negative),
+    "random_patch": {  # Voronoi particles (random points, then Lloyd's relaxation)
+        "lower": Key("vector", REQUIRED, doc="lower corner [m]"),
+        "upper": Key("vector", REQUIRED, doc="upper corner [m]"),
+        "count": Key("int", REQUIRED, positive, "number of particles"),
+        "seed": Key("int", 0, doc="seed of the random points"),
+        "lloyd_iterations": Key("int", 20, non_negative, "Lloyd's relaxations: each moves the points to the "
+                                                        "centroids of their Voronoi cells"),
     },
     "cylinder": {
-        "base_center": Key("vector", REQUIRED), "radius": Key("float", REQUIRED, positive),
-        "length": Key("float", REQUIRED, positive), "spacing": Key("float", REQUIRED, positive),
-        "axis": Key("int", 2, one_of(0, 1, 2)),
+        "base_center": Key("vector", REQUIRED, doc="centre of the base [m]"),
+        "radius": Key("float", REQUIRED, positive, "radius [m]"),
+        "length": Key("float", REQUIRED, positive, "length along the axis [m]"),
+        "spacing": Key("float", REQUIRED, positive, "spacing of the cubic lattice [m]"),
+        "axis": Key("int", 2, one_of(0, 1, 2), "the cylinder's axis (0 = x, 1 = y, 2 = z)"),
     },
-    "ring": {
-        "center": Key("vector", REQUIRED), "inner_radius": Key("float", REQUIRED, positive),
-        "outer_radius": Key("float", REQUIRED, positive), "spacing": Key("float", REQUIRED, positive),
+    "ring": {  # particles on concentric circles
+        "center": Key("vector", REQUIRED, doc="centre [m]"), "inner_radius": Key("float", REQUIRED, positive, "inner radius [m]"),
+        "outer_radius": Key("float", REQUIRED, positive, "outer radius [m]"),
+        "spacing": Key("float", REQUIRED, positive, "distance between the circles and along them [m]"),
     },
-    "disk": {
-        "center": Key("vector", REQUIRED), "radius": Key("float", REQUIRED, positive),
-        "spacing": Key("float", REQUIRED, positive),
+    "disk": {  # particles on concentric circles
+        "center": Key("vector", REQUIRED, doc="centre [m]"), "radius": Key("float", REQUIRED, positive, "radius [m]"),
+        "spacing": Key("float", REQUIRED, positive, "distance between the circles and along them [m]"),
     },
     "polar_ring": {  # a polar lattice: particles on both surfaces (KBM's stress points on a ring)
-        "center": Key("vector", REQUIRED), "inner_radius": Key("float", REQUIRED, positive),
-        "outer_radius": Key("float", REQUIRED, positive),
+        "center": Key("vector", REQUIRED, doc="centre [m]"), "inner_radius": Key("float", REQUIRED, positive, "inner radius [m]"),
+        "outer_radius": Key("float", REQUIRED, positive, "outer radius [m]"),
         "radial": Key("int", REQUIRED, positive, "rows of particles, from the inner to the outer surface"),
         "angular": Key("int", REQUIRED, positive, "particles per row"),
     },
@@ -158,8 +172,9 @@ PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ri
                    "polar_ring": (2,)}
 
 BC_KEYS = {
-    "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement")),
-    "group": Key("str", REQUIRED),
+    "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement"),
+                "fixed: held at rest; velocity: moved at value; displacement: moved to value"),
+    "group": Key("str", REQUIRED, doc="the particles it holds"),
     "value": Key("vector", None, doc="velocity [m/s] or final displacement [m]"),
     "expression": Key("strlist", None, doc="instead of value: one expression of the reference position "
                                            "x, y, z and the parameters per component"),
@@ -184,8 +199,8 @@ WALL_KEYS = {
     "point": Key("vector", REQUIRED, doc="a point of the plane at t = 0 [m]"),
     "normal": Key("vector", REQUIRED, doc="normal pointing into the material"),
     "velocity": Key("vector", None, doc="the wall's prescribed velocity [m/s] (default at rest)"),
-    "lower": Key("vector", None, doc="with upper: the box of current positions where the wall acts"),
-    "upper": Key("vector", None),
+    "lower": Key("vector", None, doc="with upper: the box of current positions where the wall acts [m]"),
+    "upper": Key("vector", None, doc="with lower: the box's upper corner [m]"),
 }
 TOOL_KEYS = {
     "group": Key("str", "all", doc="particles that can touch the tool"),
@@ -200,22 +215,24 @@ SYMMETRY_KEYS = {
 }
 INITIAL_KEYS = {
     "type": Key("str", REQUIRED, one_of("velocity", "angular_velocity", "displacement_gradient",
-                                        "velocity_field", "displacement_field")),
-    "group": Key("str", "all"),
+                                        "velocity_field", "displacement_field"),
+                "what it sets, and the key that gives it: value, omega, gradient or expression"),
+    "group": Key("str", "all", doc="the particles it sets"),
     "value": Key("vector", None, doc="velocity [m/s]"),
     "expression": Key("strlist", None, doc="velocity_field [m/s], displacement_field [m]: one expression "
                                            "of the reference position x, y, z and the parameters per "
                                            "component, e.g. [\"exp(-25000*(x-0.03)**2)\", \"0\"]"),
     "omega": Key("vector", None, doc="angular velocity: [w] in 2D, [wx, wy, wz] in 3D [rad/s]"),
     "gradient": Key("matrix", None, doc="displacement gradient H: u = H (X - center)"),
-    "center": Key("vector", None),
+    "center": Key("vector", None, doc="angular_velocity, displacement_gradient: the centre (default the "
+                                      "origin) [m]"),
 }
 PROBE_KEYS = {
-    "name": Key("str", REQUIRED),
-    "group": Key("str", REQUIRED),
-    "quantity": Key("str", REQUIRED, probe_quantity),
+    "name": Key("str", REQUIRED, doc="the name of its series in history.h5"),
+    "group": Key("str", REQUIRED, doc="the particles it reduces over"),
+    "quantity": Key("str", REQUIRED, probe_quantity, "the quantity it reads"),
     "component": Key("int", -1, doc="vector component, -1 for the norm / scalar quantities"),
-    "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum")),
+    "reduce": Key("str", "mean", one_of("mean", "max", "min", "sum"), "how the group's values become one"),
 }
 CONTACT_KEYS = {
     "bodies": Key("strlist", REQUIRED, doc="the names of the two bodies that touch (parsph.contact)"),
@@ -235,6 +252,19 @@ CONTACT_KEYS = {
                                              "neighbours touch (crack faces, folds)"),
 }
 GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
+GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.select), for the reference
+    "all": Key("bool", None, doc="true: every particle"),
+    "box": Key("table", None, doc="{ lower = [...], upper = [...] }: the particles in the closed box [m]"),
+    "sphere": Key("table", None, doc="{ center = [...], radius = r }: the particles within r of center [m]"),
+    "halfspace": Key("table", None, doc="{ point = [...], normal = [...] }: the particles with "
+                                        "(X - point) . normal >= 0 [m]"),
+    "nearest": Key("vector", None, doc="the one particle nearest this point (the lowest global id on ties) "
+                                       "[m]"),
+    "extreme": Key("table", None, doc="{ axis = k, side = \"min\" or \"max\", tolerance = t }: the particles "
+                                      "within t of the smallest or largest coordinate k (t: default half the "
+                                      "median particle size) [m]"),
+    "invert": Key("bool", False, doc="take the particles the selector does not"),
+}
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
                                "initial", "probes", "bodies", "contact")
 

@@ -67,7 +67,9 @@ class NodalFormulation:
         "update_strain": Key("float", 0.0, non_negative,
                              "ulsph: update when the largest principal log strain since the reference "
                              "exceeds this (0 = off)"),
-        "force_form": Key("str", "pair", one_of("pair", "virtual_work")),
+        "force_form": Key("str", "pair", one_of("pair", "virtual_work"),
+                          "tlsph, ulsph: the forces in the pair form [G eq. 24] or the virtual-work form "
+                          "[V eq. 11]"),
         "hourglass": Key("float", None, non_negative,
                          "hourglass coefficient alpha [G eq. 31]; default 50 for tlsph and ulsph, "
                          "0 for sph, rlm and kbm (the methods as [R] compares them)"),

@@ -207,9 +207,9 @@ def symmetric_extremes(C, dim):
 
 # ------------------------------------------------------------------ the laws' declarations
 
-ISOTROPIC_KEYS = {"youngs_modulus": Key("float", None, positive, "[Pa]"),
-                  "poisson_ratio": Key("float", None, in_range(-1.0, 0.5, True, True))}
-SHEAR_MODULUS = Key("float", None, positive, "[Pa]")
+ISOTROPIC_KEYS = {"youngs_modulus": Key("float", None, positive, "Young's modulus E [Pa]"),
+                  "poisson_ratio": Key("float", None, in_range(-1.0, 0.5, True, True), "Poisson's ratio nu")}
+SHEAR_MODULUS = Key("float", None, positive, "shear modulus mu [Pa]")
 
 
 def isotropic(material: dict, extra: tuple = ()) -> Constants:
@@ -239,7 +239,7 @@ LAWS = (
     Law("saint_venant_kirchhoff", SAINT_VENANT_KIRCHHOFF, ISOTROPIC_KEYS, isotropic, doc="[G eq. 19]"),
     Law("neo_hookean", NEO_HOOKEAN, ISOTROPIC_KEYS, isotropic, doc="[G eq. 44]"),
     Law("neo_hookean_nearly_incompressible", NEO_HOOKEAN_NEARLY_INCOMPRESSIBLE,
-        {"shear_modulus": SHEAR_MODULUS, "bulk_modulus": Key("float", None, positive, "[Pa]")},
+        {"shear_modulus": SHEAR_MODULUS, "bulk_modulus": Key("float", None, positive, "bulk modulus K [Pa]")},
         _nearly_incompressible_constants, doc="[V §2.4.1]"),
     Law("mooney_rivlin", MOONEY_RIVLIN,
         {"c1": Key("float", None, positive, "mooney_rivlin: c1 of [R eq. 18] [Pa]"),
