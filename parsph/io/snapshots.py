@@ -6,6 +6,8 @@ killed run leaves every finished snapshot readable. `snapshots.xdmf` lists the s
 a time series of point clouds that ParaView opens; rank 0 writes it whole when a run starts
 or resumes (to a temporary name, then renamed) and then adds each snapshot's entry in one
 write over the closing tags, so the cost of an entry does not grow with the run.
+`write_points` and `point_grid` also write `parsph preview`'s particles: a snapshot file
+of one snapshot, before any step.
 """
 
 from __future__ import annotations
@@ -37,6 +39,45 @@ def check_snapshots_readable(path: str) -> None:
     except Exception as exc:  # noqa: BLE001 - any damage: name the file
         raise InputError(f"{path} is damaged and cannot be continued ({type(exc).__name__}: {exc}); "
                          "restart into another --out with --restart CHECKPOINT_FILE") from None
+
+
+def write_points(out: ParticleFile, group: str, gid: np.ndarray, total: int, values: dict, t: float, step: int,
+                 connectivity: bool) -> None:
+    """Collective: the group `group` (attributes time and step) of the open file `out`,
+    with this rank's rows of the global ids `gid` (sorted) and of each field of `values`
+    ({name: rows}); first, with `connectivity`, the Polyvertex connectivity 0..total-1
+    (explicit, for readers that need it)."""
+    if connectivity:
+        out.write_rows("connectivity", gid, gid.astype(np.int64)[:, None], total)
+    if out.writer:
+        grp = out.file.create_group(group)
+        grp.attrs["time"] = t
+        grp.attrs["step"] = step
+    out.write_rows(f"{group}/gid", gid, gid, total)
+    for name, data in values.items():
+        out.write_rows(f"{group}/{name}", gid, data, total)
+
+
+def point_grid(h5_name: str, group: str, n: int, fields: dict, t: float | None = None) -> str:
+    """The XDMF grid of a cloud of n points in the HDF5 file `h5_name` (beside the index):
+    its /connectivity, and the datasets of `group`, `fields` {name: (shape per point,
+    (XDMF number type, precision))}, "position" the geometry; at time `t` (None: none)."""
+    lines = [f'<Grid Name="{group}" GridType="Uniform">' + ("" if t is None else f'<Time Value="{float(t)!r}"/>'),
+             f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
+             f'<DataItem Dimensions="{n} 1" Format="HDF" NumberType="Int" Precision="8">'
+             f'{h5_name}:/connectivity</DataItem></Topology>',
+             f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" Format="HDF" '
+             f'NumberType="Float" Precision="8">{h5_name}:/{group}/position</DataItem></Geometry>']
+    for name, (shape, (number, size)) in sorted(fields.items()):
+        if name == "position":
+            continue
+        kind = "Scalar" if len(shape) == 0 else "Vector" if len(shape) == 1 else "Tensor"
+        dims = " ".join(str(s) for s in (n,) + tuple(shape))
+        lines.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="Node">'
+                     f'<DataItem Dimensions="{dims}" Format="HDF" NumberType="{number}" '
+                     f'Precision="{size}">{h5_name}:/{group}/{name}</DataItem></Attribute>')
+    lines.append("</Grid>")
+    return "\n".join(lines) + "\n"
 
 
 class SnapshotWriter:
@@ -101,15 +142,7 @@ class SnapshotWriter:
         shapes = {name: data.shape[1:] for name, data in values.items()}
         with collective(self.comm):
             with ParticleFile(self.path, "a", self.comm) as out:
-                if first:  # explicit Polyvertex connectivity 0..n-1, for readers that need it
-                    out.write_rows("connectivity", gid, gid.astype(np.int64)[:, None], total)
-                if out.writer:
-                    grp = out.file.create_group(group)
-                    grp.attrs["time"] = sim.t
-                    grp.attrs["step"] = sim.step_count
-                out.write_rows(f"{group}/gid", gid, gid, total)
-                for name, data in values.items():
-                    out.write_rows(f"{group}/{name}", gid, data, total)
+                write_points(out, group, gid, total, values, sim.t, sim.step_count, first)
         self.times.append(sim.t)
         if self.comm.rank == 0:
             entry = (sim.t, group, total, shapes)
@@ -129,24 +162,8 @@ class SnapshotWriter:
 
     def _grid(self, t: float, group: str, n: int, shapes: dict) -> str:
         """The XDMF grid of one snapshot."""
-        base = os.path.basename(self.path)
-        lines = [f'<Grid Name="{group}" GridType="Uniform"><Time Value="{float(t)!r}"/>',
-                 f'<Topology TopologyType="Polyvertex" NumberOfElements="{n}" NodesPerElement="1">'
-                 f'<DataItem Dimensions="{n} 1" Format="HDF" NumberType="Int" Precision="8">'
-                 f'{base}:/connectivity</DataItem></Topology>',
-                 f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" Format="HDF" '
-                 f'NumberType="Float" Precision="8">{base}:/{group}/position</DataItem></Geometry>']
-        for name, shape in sorted(shapes.items()):
-            if name == "position":
-                continue
-            kind = "Scalar" if len(shape) == 0 else "Vector" if len(shape) == 1 else "Tensor"
-            dims = " ".join(str(s) for s in (n,) + tuple(shape))
-            number, size = ("Int", 4) if name == "rank" else ("Float", 8)
-            lines.append(f'<Attribute Name="{name}" AttributeType="{kind}" Center="Node">'
-                         f'<DataItem Dimensions="{dims}" Format="HDF" NumberType="{number}" '
-                         f'Precision="{size}">{base}:/{group}/{name}</DataItem></Attribute>')
-        lines.append("</Grid>")
-        return "\n".join(lines) + "\n"
+        fields = {name: (shape, ("Int", 4) if name == "rank" else ("Float", 8)) for name, shape in shapes.items()}
+        return point_grid(os.path.basename(self.path), group, n, fields, t)
 
     def _write_xdmf(self) -> None:
         """The whole index (to a temporary name, then renamed); remembers where the closing
