@@ -44,6 +44,12 @@ def _parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="validate a scene and print it resolved, with defaults")
     c.add_argument("scene")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    pv = sub.add_parser("preview", help="write the scene's particles and obstacles before any step, with a "
+                                        "picture and a summary (under mpirun as run)")
+    pv.add_argument("scene", help="scene file (TOML)")
+    pv.add_argument("--out", help="output directory (default results/NAME/preview)")
+    pv.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key, as run")
+    pv.add_argument("--overwrite", action="store_true", help="replace a previous preview in --out")
     k = sub.add_parser("keys", help="print the scene keys: type, unit, default, allowed values and meaning")
     k.add_argument("section", nargs="?",
                    help="only this section and those under it, e.g. time, bc, geometry.parts.box, material.johnson_cook")
@@ -113,6 +119,10 @@ def main(argv=None) -> int:
             with collective():
                 scene = config.load(args.scene, args.set)
             say(json.dumps(scene, indent=2))
+        elif args.command == "preview":
+            from parsph.preview import preview
+
+            return preview(args.scene, args.out, args.set, args.overwrite)
         elif args.command == "keys":
             from parsph import keyref
             from parsph.parallel.runtime import collective
