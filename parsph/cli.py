@@ -52,7 +52,7 @@ def _parser() -> argparse.ArgumentParser:
     pv.add_argument("--overwrite", action="store_true", help="replace a previous preview in --out")
     k = sub.add_parser("keys", help="print the scene keys: type, unit, default, allowed values and meaning")
     k.add_argument("section", nargs="?",
-                   help="only this section and those under it, e.g. time, bc, geometry.parts.box, material.johnson_cook")
+                   help="only this section and those under it: time, bc, geometry.parts.box, material.johnson_cook")
     k.add_argument("--markdown", action="store_true", help="as Markdown (docs/scene-keys.md is the whole of it)")
     sub.add_parser("info", help="print the environment: versions, ranks, parallel HDF5, threads")
     pl = sub.add_parser("plot", help="plot history series or snapshot fields to PNG")

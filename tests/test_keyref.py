@@ -58,7 +58,7 @@ def test_checks_describe_themselves_with_their_messages_unchanged():
     ("mooney_rivlin: c1 of [R eq. 18] [Pa]", "Pa", "mooney_rivlin: c1 of [R eq. 18]"),
     ("velocity [m/s] or final displacement [m]", "m/s or m", "velocity [m/s] or final displacement"),
     ("johnson_cook: c_p [J/(kg K)] (solids)", "J/(kg K)", "johnson_cook: c_p [J/(kg K)] (solids)"),
-    ("angular velocity: [w] in 2D, [wx, wy, wz] in 3D [rad/s]", "rad/s", "angular velocity: [w] in 2D, [wx, wy, wz] in 3D"),
+    ("omega: [w] in 2D, [wx, wy, wz] in 3D [rad/s]", "rad/s", "omega: [w] in 2D, [wx, wy, wz] in 3D"),
     ("in [0.01, 1e4]: below [V eq. 17]", "", "in [0.01, 1e4]: below [V eq. 17]"),
 ])
 def test_units_are_read_from_the_doc(doc, unit, meaning):
