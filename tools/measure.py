@@ -13,10 +13,18 @@
                                its spread (standard deviation over |mean|) around the ring.
   tools/measure.py drained OUT the funnel (runs/funnel.toml): at each snapshot, the share of
                                the fluid's mass below y = 0, through the opening.
+  tools/measure.py kirsch OUT  the stress concentration at the hole of runs/plate_hole.toml (its
+                               parameters W, d, n): at the last snapshot, sigma_yy at the particle
+                               nearest the hole's edge (a, 0) and the edge value fitted to the
+                               particles within FIT_BAND spacings of the hole, over the net-section
+                               stress, against Peterson's K_tn; the far field's sigma_yy against the
+                               traction and the kinetic energy left (static state).
 """
 
 from __future__ import annotations
 
+import json
+import os
 import sys
 
 import numpy as np
@@ -24,7 +32,9 @@ import scipy.sparse as sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from parsph.io import read_snapshots
+from parsph.bc import Tractions
+from parsph.geometry import select
+from parsph.io import read_history, read_snapshots
 
 
 def snapshots(out: str):
@@ -80,7 +90,107 @@ def drained(out: str) -> None:
         print(f"t = {t:.4g} s: {below.mean():.3f} of the fluid below the opening")
 
 
-COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained}
+FIT_BAND = 3.0  # the edge fit takes the particles within this many spacings of the hole
+FIT_DEGREE = (2, 2)  # its basis q^i cos(2 k theta), q = (a / r)^2, i and k up to these
+FAR_BAND = (3.0, 5.0)  # the far field: the particles this many spacings below the loaded edge
+
+
+def peterson_ktn(ratio: float) -> float:
+    """Net-section stress concentration factor of a finite-width plate with a central circular
+    hole in tension, d/W = ratio (Howland's solution as fitted by Peterson's Stress
+    Concentration Factors, 3rd ed., Chart 4.1, Eq. 4.1)."""
+    return 3.0 - 3.13 * ratio + 3.66 * ratio ** 2 - 1.53 * ratio ** 3
+
+
+def heywood_ktn(ratio: float) -> float:
+    """Heywood's approximation of the same factor, 2 + (1 - d/W)^3."""
+    return 2.0 + (1.0 - ratio) ** 3
+
+
+def kirsch_hoop(q, theta):
+    """Kirsch's hoop stress around a hole of radius a in an infinite plate under a remote
+    stress 1 along y, at q = (a / r)^2 and the angle theta from the x axis."""
+    return 0.5 * (1.0 + q) + 0.5 * (1.0 + 3.0 * q * q) * np.cos(2.0 * theta)
+
+
+def edge_fit(q, theta, hoop, degree=FIT_DEGREE) -> float:
+    """The hoop stress at the edge (q = 1) on the x axis (theta = 0) of the least-squares fit
+    sum c_ik q^i cos(2 k theta) (i, k up to `degree`) of the values `hoop`; the basis holds
+    Kirsch's field exactly and, with k = 2, the first harmonic a finite width adds."""
+    columns = [q ** i * np.cos(2 * k * theta) for i in range(degree[0] + 1) for k in range(degree[1] + 1)]
+    return float(np.linalg.lstsq(np.column_stack(columns), hoop, rcond=None)[0].sum())
+
+
+def kirsch_figures(scene: dict, X: np.ndarray, sigma: np.ndarray, measure: np.ndarray, kinetic: float,
+                   strain: float) -> dict:
+    """The figures of a run of runs/plate_hole.toml at rest: reference positions X, Cauchy
+    stresses sigma and measures (volume / thickness) of the particles, the kinetic and strain
+    energy."""
+    p = scene["parameters"]
+    W, a, h = p["W"], p["d"] / 2, p["d"] / p["n"]
+    thickness = scene["geometry"]["thickness"]
+    masks = {name: select(spec, X, measure) for name, spec in scene["groups"].items()}
+    force = np.zeros_like(X)
+    Tractions(scene["tractions"], masks, X, np.arange(len(X)), measure, thickness, p).add(force, np.inf)
+    load = force[:, 1].sum()
+    nominal = load / (thickness * (W / 2 - a))
+    r, theta = np.hypot(*X.T), np.arctan2(X[:, 1], X[:, 0])
+    tangent = np.column_stack([-np.sin(theta), np.cos(theta)])
+    hoop = np.einsum("na,nab,nb->n", tangent, sigma[:, :2, :2], tangent) / nominal
+    near = r < a + FIT_BAND * h
+    q = (a / r) ** 2
+    nearest = int(np.argmin(np.hypot(X[:, 0] - a, X[:, 1])))
+    top = X[:, 1].max() + h / 2
+    far = (X[:, 1] > top - FAR_BAND[1] * h) & (X[:, 1] < top - FAR_BAND[0] * h)
+    far_mean = np.sum(sigma[far, 1, 1] * measure[far]) / np.sum(measure[far])
+    ratio = p["d"] / W
+    variants = [edge_fit(q[k], theta[k], hoop[k], degree) for band, degree in
+                ((3.0, (2, 1)), (3.0, (2, 2)), (4.0, (2, 2)), (4.0, (3, 2)), (5.0, (3, 3)))
+                for k in [r < a + band * h]]
+    return {
+        "ratio": ratio, "h": h, "load": load, "nominal": nominal, "traction": load / (thickness * W / 2),
+        "kinetic_ratio": kinetic / strain,
+        "far": far_mean / (load / (thickness * W / 2)), "far_spread": (sigma[far, 1, 1].min() / far_mean,
+                                                                      sigma[far, 1, 1].max() / far_mean),
+        "nearest": sigma[nearest, 1, 1] / nominal, "nearest_r": r[nearest] / a,
+        "nearest_theta": np.degrees(theta[nearest]),
+        "nearest_kirsch": kirsch_hoop(q[nearest], theta[nearest]) / 3.0,
+        "fit": edge_fit(q[near], theta[near], hoop[near]), "fit_count": int(near.sum()),
+        "fit_on_kirsch": edge_fit(q[near], theta[near], kirsch_hoop(q[near], theta[near])) / 3.0 - 1.0,
+        "fit_variants": variants,
+        "ktn": peterson_ktn(ratio), "heywood": heywood_ktn(ratio),
+    }
+
+
+def kirsch(out: str) -> None:
+    with open(os.path.join(out, "scene.json")) as fh:
+        scene = json.load(fh)
+    last = read_snapshots(out)[-1]
+    history = read_history(out)
+    thickness = scene["geometry"]["thickness"]
+    dim = scene["scene"]["dimension"]
+    f = kirsch_figures(scene, last["reference_position"][:, :dim], last["cauchy_stress"], last["volume"] / thickness,
+                       history["kinetic_energy"][-1], history["strain_energy"][-1])
+    ktn = f["ktn"]
+    print(f"plate with a hole, d/W = {f['ratio']:.3g}, spacing d/{scene['parameters']['n']:g}, "
+          f"t = {last.time:.4g} s")
+    print(f"static state: kinetic / strain energy {f['kinetic_ratio']:.2e}")
+    print(f"load {f['load']:.6g} N on the quarter: traction {f['traction']:.6g} Pa, net-section stress "
+          f"{f['nominal']:.6g} Pa")
+    print(f"far field ({FAR_BAND[0]:g} to {FAR_BAND[1]:g} spacings below the loaded edge): mean sigma_yy / "
+          f"traction {f['far']:.5f} (particles {f['far_spread'][0]:.4f} to {f['far_spread'][1]:.4f} of the mean)")
+    print(f"nearest particle to the edge (r = {f['nearest_r']:.4f} a, {f['nearest_theta']:.2f} deg): sigma_yy / "
+          f"net stress {f['nearest']:.4f} (Kirsch there: {f['nearest_kirsch']:.4f} of the edge value)")
+    print(f"edge fit ({f['fit_count']} particles within {FIT_BAND:g} spacings, q^i cos 2k theta, i, k <= "
+          f"{FIT_DEGREE[0]}): K = {f['fit']:.4f}; the same fit of Kirsch's field at these particles errs by "
+          f"{f['fit_on_kirsch']:+.1e}; other bands and bases {min(f['fit_variants']):.4f} to "
+          f"{max(f['fit_variants']):.4f}")
+    print(f"Peterson K_tn = {ktn:.4f} (Heywood {f['heywood']:.4f}): fit {100 * (f['fit'] / ktn - 1):+.2f} %, "
+          f"nearest particle {100 * (f['nearest'] / ktn - 1):+.2f} %; gross K_tg = {f['fit'] / (1 - f['ratio']):.4f} "
+          f"(Peterson {ktn / (1 - f['ratio']):.4f})")
+
+
+COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "kirsch": kirsch}
 
 if __name__ == "__main__":
     if len(sys.argv) != 3 or sys.argv[1] not in COMMANDS:
