@@ -18,17 +18,24 @@ from parsph.formulations import galerkin
 from parsph.geometry.gauss_points import BoxGaussPoints
 from parsph.geometry.stress_points import stress_points_of
 from parsph.parallel.decomposition import LocalBody, block_cuts, localize, nearby, partition
-from parsph.parallel.runtime import collective, warn
+from parsph.parallel.runtime import collective, say, warn
 
 PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": geometry.Cylinder,
          "ring": geometry.Ring, "disk": geometry.Disk, "polar_ring": geometry.PolarRing}
 
 
-def _generators(parts: list, where: str, dim: int) -> list:
+def _generators(parts: list, where: str, dim: int, comm=None) -> list:
     """The part generators of one body's `parts` (named `where` in messages), checked
-    (arguments, dimension) without building."""
+    (arguments, dimension) without building; solid parts (config.SOLIDS) are filled
+    lattices whose counting the ranks of `comm` share."""
     gens = []
     for i, part in enumerate(parts):
+        if part["shape"] in config.SOLIDS:
+            try:
+                gens.append(geometry.fill(part, f"{where}[{i}]", dim, comm, warn))
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
+            continue
         args = {k: v for k, v in part.items() if k != "shape"}
         try:
             gens.append(PARTS[part["shape"]](**args))
@@ -211,7 +218,11 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
     many = len(specs) > 1
     wheres = [f"bodies[{b}].parts" if many else "geometry.parts" for b in range(len(specs))]
     with collective(comm):
-        gens = [_generators(body["parts"], where, dim) for body, where in zip(specs, wheres)]
+        gens = [_generators(body["parts"], where, dim, comm) for body, where in zip(specs, wheres)]
+        for body_gens, where in zip(gens, wheres):
+            for i, g in enumerate(body_gens):
+                if isinstance(g, geometry.Fill):
+                    say(f"parsph: {where}[{i}]: {g.report()}")
         total = sum(g.count for body_gens in gens for g in body_gens)
         if total > geometry.MAX_PARTICLES:
             raise InputError(f"the bodies produce {total} particles in all, more than 2^31")

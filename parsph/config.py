@@ -168,8 +168,53 @@ PART_KEYS: dict[str, dict[str, Key]] = {
         "angular": Key("int", REQUIRED, positive, "particles per row"),
     },
 }
+# Solid parts (geometry.solids), filled with a cell-centred lattice (geometry.fill): a part's
+# transforms, and its spacing (not in a boolean's parts, which the boolean's spacing fills).
+TRANSFORM_KEYS = {
+    "scale": Key("value", None, doc="scale factor, a number or one per axis (applied first)"),
+    "mirror": Key("value", None, doc="reflect: an axis (0 = x, 1 = y, 2 = z) or a list of axes (after scale)"),
+    "rotate": Key("value", None, doc="rotate (after mirror): in 2D an angle in degrees, counter-clockwise; in 3D a "
+                                     "rotation vector [x, y, z], the axis times the angle in degrees"),
+    "translate": Key("vector", None, doc="move by this vector (applied last) [m]"),
+}
+FILL_KEYS = {
+    "spacing": Key("float", None, positive, "spacing of the cell-centred lattice that fills the solid; required, "
+                                            "except in a boolean's parts [m]"),
+}
+OUTLINE_KEYS = {
+    "vertices": Key("matrix", None, doc="the outline's vertices [[x, y], ...], either way round [m]"),
+    "holes": Key("value", None, doc="the holes' outlines, a list of vertex lists [[[x, y], ...], ...] [m]"),
+    "file": Key("str", None, doc="instead of vertices: an outline file, .csv (x,y lines), .dxf or .svg (its "
+                                 "closed outlines, holes included), relative to the scene file"),
+}
+SOLID_KEYS: dict[str, dict[str, Key]] = {
+    "polygon": {**OUTLINE_KEYS},
+    "circle": {"center": Key("vector", REQUIRED, doc="centre [m]"),
+               "radius": Key("float", REQUIRED, positive, "radius; the area is exactly pi r^2 [m]")},
+    "sphere": {"center": Key("vector", REQUIRED, doc="centre [m]"),
+               "radius": Key("float", REQUIRED, positive, "radius [m]")},
+    "cone": {"base_center": Key("vector", REQUIRED, doc="centre of the base [m]"),
+             "axis": Key("vector", [0.0, 0.0, 1.0], doc="direction from the base to the top"),
+             "length": Key("float", REQUIRED, positive, "height along the axis [m]"),
+             "radius": Key("float", REQUIRED, positive, "radius of the base [m]"),
+             "top_radius": Key("float", 0.0, non_negative, "radius of the top: 0 a cone, else a frustum [m]")},
+    "extrusion": {**OUTLINE_KEYS,
+                  "z0": Key("float", 0.0, doc="the outline's plane z = z0 [m]"),
+                  "length": Key("float", REQUIRED, positive, "extruded length along +z [m]")},
+    "surface": {"file": Key("str", REQUIRED, doc="a closed triangle mesh (.stl, .obj, .ply) relative to the scene "
+                                                 "file; inside: generalised winding number > 1/2")},
+    **{kind: {"parts": Key("table", REQUIRED, doc=f"the solids {how}: a list of tables [{{shape = ...}}, ...] "
+                                                   "(solid shapes, without spacing)")}
+       for kind, how in (("union", "united"), ("difference", "the first minus the others"),
+                         ("intersection", "intersected"))},
+}
+SOLIDS = tuple(SOLID_KEYS)
+for _shape, _keys in SOLID_KEYS.items():
+    PART_KEYS[_shape] = {**_keys, **FILL_KEYS, **TRANSFORM_KEYS}
 PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,),
-                   "polar_ring": (2,)}
+                   "polar_ring": (2,), "polygon": (2,), "circle": (2,), "sphere": (3,), "cone": (3,),
+                   "extrusion": (3,), "surface": (3,), "union": (2, 3), "difference": (2, 3),
+                   "intersection": (2, 3)}
 
 BC_KEYS = {
     "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement"),
@@ -350,29 +395,40 @@ def _array(path: str, raw: Any) -> list:
     return raw
 
 
-def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts") -> list[dict]:
+def _validate_parts(raw_parts, dim: int, where: str = "geometry.parts", nested: bool = False) -> list[dict]:
+    """The parts of a body, or (nested) the solids of a boolean part."""
     parts = []
+    shapes = SOLIDS if nested else tuple(PART_KEYS)
     for i, raw in enumerate(_array(where, raw_parts)):
         path = f"{where}[{i}]"
         shape = raw.get("shape", None)
-        if shape not in PART_KEYS:
+        if shape not in shapes:
             if shape is None:
-                raise InputError(f"missing required key '{path}.shape' (one of {', '.join(PART_KEYS)})")
-            raise InputError(f"{path}.shape must be one of {', '.join(PART_KEYS)}, got {shape!r}")
+                raise InputError(f"missing required key '{path}.shape' (one of {', '.join(shapes)})")
+            raise InputError(f"{path}.shape must be one of {', '.join(shapes)}, got {shape!r}")
         if dim not in PART_DIMENSIONS[shape]:
             raise InputError(f"{path}: shape '{shape}' is not available in {dim}D")
         body = {k: v for k, v in raw.items() if k != "shape"}
         part = {"shape": shape, **_table(path, body, PART_KEYS[shape], dim)}
         for name, key in PART_KEYS[shape].items():
-            if key.kind == "vector":
+            if key.kind == "vector" and not (shape == "cone" and name == "axis"):
                 _vector_len(f"{path}.{name}", part[name], dim)
+        if shape in SOLIDS:
+            if (part["spacing"] is None) != nested:
+                raise InputError(f"missing required key '{path}.spacing'" if not nested else
+                                 f"{path}.spacing: the parts of a boolean take its spacing; remove it")
+            if "parts" in part:
+                part["parts"] = _validate_parts(part["parts"], dim, f"{path}.parts", nested=True)
+            if "vertices" in part and (part["vertices"] is None) == (part["file"] is None):
+                raise InputError(f"{path}: give either vertices or file")
         if "lower" in part and any(lo >= hi for lo, hi in zip(part["lower"], part["upper"])):
             raise InputError(f"{path}: lower must be < upper in every component")
         if shape in ("ring", "polar_ring") and part["inner_radius"] >= part["outer_radius"]:
             raise InputError(f"{path}.inner_radius must be < outer_radius")
         parts.append(part)
     if not parts:
-        raise InputError(f"{where} is empty: a body needs at least one shape ([[{where}]])")
+        raise InputError(f"{where} is empty: a " + ("boolean needs at least one solid" if nested else
+                                                    f"body needs at least one shape ([[{where}]])"))
     return parts
 
 
@@ -950,11 +1006,29 @@ def _read(path: str) -> dict:
         raise InputError(f"scene file {path} is not valid TOML: arrays or tables nested too deeply") from None
 
 
+def _anchor_files(raw: dict, directory: str) -> None:
+    """Make the relative `file` paths of the raw scene's parts (and of their boolean parts)
+    relative to `directory`, the scene file's."""
+    def walk(parts):
+        for part in parts if isinstance(parts, list) else ():
+            if isinstance(part, dict):
+                if isinstance(part.get("file"), str) and not os.path.isabs(part["file"]):
+                    part["file"] = os.path.normpath(os.path.join(directory, part["file"]))
+                walk(part.get("parts"))
+
+    geometry = raw.get("geometry")
+    walk(geometry.get("parts") if isinstance(geometry, dict) else None)
+    for body in raw.get("bodies") if isinstance(raw.get("bodies"), list) else ():
+        walk(body.get("parts") if isinstance(body, dict) else None)
+
+
 def load(path: str, overrides: list[str] = ()) -> dict:
-    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene."""
+    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene
+    (its parts' files found relative to the scene file)."""
     raw = _read(path)
     for text in overrides:
         apply_override(raw, *parse_override(text))
+    _anchor_files(raw, os.path.dirname(os.path.abspath(path)))
     return validate(raw)
 
 

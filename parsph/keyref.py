@@ -24,7 +24,8 @@ from parsph.materials import FAILURES, LAWS
 
 KINDS = {"int": "integer", "float": "number", "str": "string", "bool": "boolean",
          "vector": "vector (one number per dimension)", "matrix": "matrix (list of rows)",
-         "intlist": "list of integers", "strlist": "list of strings", "table": "table"}
+         "intlist": "list of integers", "strlist": "list of strings", "table": "table",
+         "value": "number or list (see the meaning)"}
 UNIT_SYMBOLS = {"1", "m", "s", "kg", "N", "Pa", "J", "W", "K", "rad"}
 PARAMETER = Key("float", REQUIRED, doc="a named number: any string value \"= EXPR\" in the scene is evaluated over "
                                        "the parameters (numbers, + - * / ** and brackets), so that --set "

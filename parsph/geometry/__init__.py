@@ -2,6 +2,7 @@
 (positions (n, D), volumes (n,))) and whole-set functions, kernel support radii and
 particle group selection."""
 
+from .fill import Fill, fill
 from .groups import select
 from .lattice import MAX_PARTICLES, Box, box
 from .shapes import Cylinder, Disk, PolarRing, Ring, close_pairs, cylinder, disk, ring, shadowed, union
@@ -13,6 +14,7 @@ __all__ = [
     "Box",
     "Cylinder",
     "Disk",
+    "Fill",
     "PolarRing",
     "RandomPatch",
     "Ring",
@@ -20,6 +22,7 @@ __all__ = [
     "close_pairs",
     "cylinder",
     "disk",
+    "fill",
     "random_box",
     "random_patch",
     "ring",
