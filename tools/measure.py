@@ -15,9 +15,10 @@
                                the fluid's mass below y = 0, through the opening.
   tools/measure.py kirsch OUT  the stress concentration at the hole of runs/plate_hole.toml (its
                                parameters W, d, n): at the last snapshot, sigma_yy at the particle
-                               nearest the hole's edge (a, 0) and the edge value fitted to the
-                               particles within FIT_BAND spacings of the hole, over the net-section
-                               stress, against Peterson's K_tn; the far field's sigma_yy against the
+                               nearest the hole's edge (a, 0), and at the edge from Michell's
+                               solution around a traction-free hole fitted to the stresses of the
+                               particles FIT_BAND spacings from the edge, over the net-section
+                               stress, against Roark's K_tn; the far field's sigma_yy against the
                                traction and the kinetic energy left (static state).
 """
 
@@ -90,15 +91,15 @@ def drained(out: str) -> None:
         print(f"t = {t:.4g} s: {below.mean():.3f} of the fluid below the opening")
 
 
-FIT_BAND = 3.0  # the edge fit takes the particles within this many spacings of the hole
-FIT_DEGREE = (2, 2)  # its basis q^i cos(2 k theta), q = (a / r)^2, i and k up to these
+FIT_BAND = (1.0, 6.0)  # the edge fit takes the particles this many spacings from the hole's edge
+FIT_HARMONICS = 6  # and Michell's terms cos n theta up to this n
 FAR_BAND = (3.0, 5.0)  # the far field: the particles this many spacings below the loaded edge
 
 
-def peterson_ktn(ratio: float) -> float:
+def roark_ktn(ratio: float) -> float:
     """Net-section stress concentration factor of a finite-width plate with a central circular
-    hole in tension, d/W = ratio (Howland's solution as fitted by Peterson's Stress
-    Concentration Factors, 3rd ed., Chart 4.1, Eq. 4.1)."""
+    hole in tension, d/W = ratio (Roark's Formulas for Stress and Strain, 7th ed., Table 17.1,
+    case 1a)."""
     return 3.0 - 3.13 * ratio + 3.66 * ratio ** 2 - 1.53 * ratio ** 3
 
 
@@ -107,18 +108,37 @@ def heywood_ktn(ratio: float) -> float:
     return 2.0 + (1.0 - ratio) ** 3
 
 
-def kirsch_hoop(q, theta):
-    """Kirsch's hoop stress around a hole of radius a in an infinite plate under a remote
-    stress 1 along y, at q = (a / r)^2 and the angle theta from the x axis."""
-    return 0.5 * (1.0 + q) + 0.5 * (1.0 + 3.0 * q * q) * np.cos(2.0 * theta)
+def kirsch_polar(rho, theta):
+    """Kirsch's (sigma_rr, sigma_tt, sigma_rt) around a hole of radius a in an infinite plate
+    under a remote stress 1 along y, at rho = r / a and the angle theta from the x axis."""
+    q = rho ** -2.0
+    c, s = np.cos(2.0 * theta), np.sin(2.0 * theta)
+    return np.array([0.5 * (1 - q) - 0.5 * (1 - 4 * q + 3 * q * q) * c, 0.5 * (1 + q) + 0.5 * (1 + 3 * q * q) * c,
+                     0.5 * (1 + 2 * q - 3 * q * q) * s])
 
 
-def edge_fit(q, theta, hoop, degree=FIT_DEGREE) -> float:
-    """The hoop stress at the edge (q = 1) on the x axis (theta = 0) of the least-squares fit
-    sum c_ik q^i cos(2 k theta) (i, k up to `degree`) of the values `hoop`; the basis holds
-    Kirsch's field exactly and, with k = 2, the first harmonic a finite width adds."""
-    columns = [q ** i * np.cos(2 * k * theta) for i in range(degree[0] + 1) for k in range(degree[1] + 1)]
-    return float(np.linalg.lstsq(np.column_stack(columns), hoop, rcond=None)[0].sum())
+def michell_terms(rho, theta, harmonics: int = FIT_HARMONICS) -> list:
+    """The stresses (sigma_rr, sigma_tt, sigma_rt), each (3, len(rho)), of Michell's solution
+    around a traction-free hole, symmetric about both axes, term by term: the Airy functions
+    phi = f(r) cos n theta, n = 0, 2, ..., harmonics (f = r^2, ln r for n = 0; r^(n+2), r^n,
+    r^(2-n), r^-n otherwise), combined so that sigma_rr = sigma_rt = 0 at r = a (rho = 1)."""
+    terms = [np.array([2 * (1 - rho ** -2.0), 2 * (1 + rho ** -2.0), 0 * rho])]
+    for n in range(2, harmonics + 1, 2):
+        m = np.array([n + 2, n, 2 - n, -n], dtype=float)
+        for c in np.linalg.svd(np.array([m - n * n, m - 1]))[2][2:]:  # free of traction at rho = 1
+            power = [ci * rho ** (mi - 2) for ci, mi in zip(c, m)]
+            terms.append(np.array([sum(p * (mi - n * n) for p, mi in zip(power, m)) * np.cos(n * theta),
+                                   sum(p * mi * (mi - 1) for p, mi in zip(power, m)) * np.cos(n * theta),
+                                   sum(p * n * (mi - 1) for p, mi in zip(power, m)) * np.sin(n * theta)]))
+    return terms
+
+
+def edge_fit(rho, theta, polar, harmonics: int = FIT_HARMONICS) -> float:
+    """sigma_tt at the hole's edge on the x axis (rho = 1, theta = 0) of the least-squares fit
+    of Michell's terms to the stresses `polar` = (sigma_rr, sigma_tt, sigma_rt) at (rho, theta)."""
+    A = np.column_stack([t.ravel() for t in michell_terms(rho, theta, harmonics)])
+    c = np.linalg.lstsq(A, np.ravel(polar), rcond=None)[0]
+    return float(sum(ci * t[1, 0] for ci, t in zip(c, michell_terms(np.ones(1), np.zeros(1), harmonics))))
 
 
 def kirsch_figures(scene: dict, X: np.ndarray, sigma: np.ndarray, measure: np.ndarray, kinetic: float,
@@ -134,31 +154,34 @@ def kirsch_figures(scene: dict, X: np.ndarray, sigma: np.ndarray, measure: np.nd
     Tractions(scene["tractions"], masks, X, np.arange(len(X)), measure, thickness, p).add(force, np.inf)
     load = force[:, 1].sum()
     nominal = load / (thickness * (W / 2 - a))
-    r, theta = np.hypot(*X.T), np.arctan2(X[:, 1], X[:, 0])
+    rho, theta = np.hypot(*X.T) / a, np.arctan2(X[:, 1], X[:, 0])
+    radial = np.column_stack([np.cos(theta), np.sin(theta)])
     tangent = np.column_stack([-np.sin(theta), np.cos(theta)])
-    hoop = np.einsum("na,nab,nb->n", tangent, sigma[:, :2, :2], tangent) / nominal
-    near = r < a + FIT_BAND * h
-    q = (a / r) ** 2
+    polar = np.array([np.einsum("na,nab,nb->n", u, sigma[:, :2, :2], v) for u, v in
+                      ((radial, radial), (tangent, tangent), (radial, tangent))]) / nominal
+
+    def fit(band, harmonics=FIT_HARMONICS, field=polar):
+        k = (rho >= 1 + band[0] * h / a) & (rho < 1 + band[1] * h / a)
+        return edge_fit(rho[k], theta[k], field[:, k], harmonics), int(k.sum())
+
     nearest = int(np.argmin(np.hypot(X[:, 0] - a, X[:, 1])))
     top = X[:, 1].max() + h / 2
     far = (X[:, 1] > top - FAR_BAND[1] * h) & (X[:, 1] < top - FAR_BAND[0] * h)
     far_mean = np.sum(sigma[far, 1, 1] * measure[far]) / np.sum(measure[far])
+    traction = load / (thickness * W / 2)
     ratio = p["d"] / W
-    variants = [edge_fit(q[k], theta[k], hoop[k], degree) for band, degree in
-                ((3.0, (2, 1)), (3.0, (2, 2)), (4.0, (2, 2)), (4.0, (3, 2)), (5.0, (3, 3)))
-                for k in [r < a + band * h]]
+    edge, count = fit(FIT_BAND)
     return {
-        "ratio": ratio, "h": h, "load": load, "nominal": nominal, "traction": load / (thickness * W / 2),
+        "ratio": ratio, "load": load, "nominal": nominal, "traction": traction,
         "kinetic_ratio": kinetic / strain,
-        "far": far_mean / (load / (thickness * W / 2)), "far_spread": (sigma[far, 1, 1].min() / far_mean,
-                                                                      sigma[far, 1, 1].max() / far_mean),
-        "nearest": sigma[nearest, 1, 1] / nominal, "nearest_r": r[nearest] / a,
-        "nearest_theta": np.degrees(theta[nearest]),
-        "nearest_kirsch": kirsch_hoop(q[nearest], theta[nearest]) / 3.0,
-        "fit": edge_fit(q[near], theta[near], hoop[near]), "fit_count": int(near.sum()),
-        "fit_on_kirsch": edge_fit(q[near], theta[near], kirsch_hoop(q[near], theta[near])) / 3.0 - 1.0,
-        "fit_variants": variants,
-        "ktn": peterson_ktn(ratio), "heywood": heywood_ktn(ratio),
+        "far": far_mean / traction, "far_spread": (sigma[far, 1, 1].min() / far_mean, sigma[far, 1, 1].max() / far_mean),
+        "nearest": sigma[nearest, 1, 1] / nominal, "nearest_rho": rho[nearest], "nearest_theta": np.degrees(theta[nearest]),
+        "nearest_kirsch": kirsch_polar(rho[nearest], 0.0)[1] / 3.0,
+        "fit": edge, "fit_count": count,
+        "fit_on_kirsch": fit(FIT_BAND, field=kirsch_polar(rho, theta))[0] / 3.0 - 1.0,
+        "fit_variants": [fit(band, harmonics)[0] for band in ((0.0, 4.0), (1.0, 6.0), (1.0, 10.0), (2.0, 8.0))
+                         for harmonics in (4, 6, 8)],
+        "ktn": roark_ktn(ratio), "heywood": heywood_ktn(ratio),
     }
 
 
@@ -179,15 +202,16 @@ def kirsch(out: str) -> None:
           f"{f['nominal']:.6g} Pa")
     print(f"far field ({FAR_BAND[0]:g} to {FAR_BAND[1]:g} spacings below the loaded edge): mean sigma_yy / "
           f"traction {f['far']:.5f} (particles {f['far_spread'][0]:.4f} to {f['far_spread'][1]:.4f} of the mean)")
-    print(f"nearest particle to the edge (r = {f['nearest_r']:.4f} a, {f['nearest_theta']:.2f} deg): sigma_yy / "
-          f"net stress {f['nearest']:.4f} (Kirsch there: {f['nearest_kirsch']:.4f} of the edge value)")
-    print(f"edge fit ({f['fit_count']} particles within {FIT_BAND:g} spacings, q^i cos 2k theta, i, k <= "
-          f"{FIT_DEGREE[0]}): K = {f['fit']:.4f}; the same fit of Kirsch's field at these particles errs by "
-          f"{f['fit_on_kirsch']:+.1e}; other bands and bases {min(f['fit_variants']):.4f} to "
+    print(f"nearest particle to the edge (r = {f['nearest_rho']:.4f} a, {f['nearest_theta']:.2f} deg): "
+          f"sigma_yy / net stress {f['nearest']:.4f} ({100 * (f['nearest'] / ktn - 1):+.2f} % from K_tn; Kirsch's "
+          f"sigma_yy at that radius is {f['nearest_kirsch']:.3f} of its edge value)")
+    print(f"edge fit (Michell's terms to cos {FIT_HARMONICS} theta, traction-free hole, to the {f['fit_count']} "
+          f"particles {FIT_BAND[0]:g} to {FIT_BAND[1]:g} spacings from the edge): K = {f['fit']:.4f} "
+          f"({100 * (f['fit'] / ktn - 1):+.2f} % from K_tn); of Kirsch's field at these particles it errs by "
+          f"{f['fit_on_kirsch']:+.1e}; other bands and harmonics {min(f['fit_variants']):.4f} to "
           f"{max(f['fit_variants']):.4f}")
-    print(f"Peterson K_tn = {ktn:.4f} (Heywood {f['heywood']:.4f}): fit {100 * (f['fit'] / ktn - 1):+.2f} %, "
-          f"nearest particle {100 * (f['nearest'] / ktn - 1):+.2f} %; gross K_tg = {f['fit'] / (1 - f['ratio']):.4f} "
-          f"(Peterson {ktn / (1 - f['ratio']):.4f})")
+    print(f"Roark's K_tn = {ktn:.4f} (Heywood's {f['heywood']:.4f}); gross K_tg = {f['fit'] / (1 - f['ratio']):.4f}"
+          f" (Roark's {ktn / (1 - f['ratio']):.4f})")
 
 
 COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "kirsch": kirsch}
