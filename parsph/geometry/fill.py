@@ -3,16 +3,18 @@ blocks of rows: the lattice of spacing h centred on the solid's bounding box, th
 inside kept, layer after layer along the last axis (first axis fastest within a layer).
 Every particle has the volume exact volume / count, so the volumes sum to the solid's.
 
-The count needs every layer's inside count: with a communicator each rank classifies its
-share of the layers and the ranks exchange the counts; rows(start, stop) classifies again
-only the layers holding those rows. Layers are handled in slabs of SLAB layers aligned on
-the lattice, and a solid that can tell points far from its boundary (a closed surface)
-classifies whole blocks of SLAB^3 cells by their centre, so the particles do not depend on
+The count needs every layer's inside count. The layers are classified in chunks (of about
+CHUNK points, aligned on the lattice): with a communicator each rank classifies its share of
+the chunks, keeps their masks (a bit per point) and the ranks exchange the layers' counts;
+rows(start, stop) classifies only the chunks holding those rows that it does not keep. A
+solid that can tell points far from its boundary (a closed surface) classifies whole blocks
+of LEVELS cells, aligned on the lattice, by their centre. So the particles do not depend on
 the rank count.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -22,7 +24,7 @@ from parsph.parallel.runtime import collective
 from .lattice import MAX_PARTICLES
 from .solids import solid
 
-SLAB = 4  # layers per slab; blocks of SLAB^3 cells far from a surface are classified at once
+LEVELS = (16, 4, 2)  # block sizes (cells per side) classified at once when far from a surface
 CHUNK = 1 << 20  # lattice points classified at once (about)
 
 
@@ -46,20 +48,18 @@ class Fill:
             raise ValueError(f"{name}: the bounding box {span.round(1).tolist()} spacings wide is too large a "
                              "lattice to classify; use a larger spacing")
         self.n = np.maximum(1, np.ceil(span * (1.0 - 1e-12))).astype(np.int64)
-        origin = 0.5 * (lo + hi) - 0.5 * self.n * h
-        self.origin = origin
-        self.axes = [origin[k] + (np.arange(self.n[k]) + 0.5) * h for k in range(self.dim)]
+        self.origin = 0.5 * (lo + hi) - 0.5 * self.n * h
+        self.axes = [self.origin[k] + (np.arange(self.n[k]) + 0.5) * h for k in range(self.dim)]
         self.per_layer = int(np.prod(self.n[:-1]))
-        self.stride = SLAB * max(1, (CHUNK // max(self.per_layer, 1)) // SLAB)  # layers per chunk
-        layers = int(self.n[-1])
-        slabs = -(-layers // SLAB)
-        if comm is None:
-            counts = self._counts(0, layers)
-        else:
-            cuts = np.linspace(0, slabs, comm.size + 1).round().astype(np.int64) * SLAB
-            with collective(comm):  # a rank that fails here must not meet the others' allgather below
-                mine = self._counts(min(int(cuts[comm.rank]), layers), min(int(cuts[comm.rank + 1]), layers))
-            counts = np.concatenate(comm.allgather(mine))
+        top = LEVELS[0]
+        self.stride = top * max(1, CHUNK // (self.per_layer * top))  # layers per chunk, on the blocks
+        chunks = -(-int(self.n[-1]) // self.stride)
+        cuts = np.linspace(0, chunks, (comm.size if comm else 1) + 1).round().astype(np.int64)
+        rank = comm.rank if comm else 0
+        self._kept = {}  # chunk -> packed inside mask, of the chunks this rank counted
+        with collective(comm) if comm else contextlib.nullcontext():  # no rank may miss the allgather
+            mine = [self._count(c) for c in range(cuts[rank], cuts[rank + 1])]
+        counts = np.concatenate([np.zeros(0, np.int64), *(sum(comm.allgather(mine), []) if comm else mine)])
         self.first = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.count = int(self.first[-1])
         if self.count == 0:
@@ -74,50 +74,62 @@ class Fill:
         return (f"{self.count} particles at spacing {self.h:g}, volume {self.volume:.6g}, lattice volume "
                 f"error {100.0 * (self.lattice_volume / self.volume - 1.0):+.3f} %")
 
-    def _layers(self, k0: int, k1: int):
-        """Positions of the lattice points of layers k0..k1-1 (k0 on a slab) and which are
-        inside."""
-        grids = np.meshgrid(*self.axes[:-1], self.axes[-1][k0:k1], indexing="ij")
-        P = np.column_stack([g.ravel(order="F") for g in grids])
+    def _points(self, c: int):
+        """Lattice indices (per axis) and positions of the points of chunk c, layers
+        c·stride.. on."""
+        k0 = c * self.stride
+        layers = np.arange(k0, min(k0 + self.stride, int(self.n[-1])))
+        index = [g.ravel(order="F") for g in np.meshgrid(*[np.arange(n) for n in self.n[:-1]], layers, indexing="ij")]
+        return index, self.origin + (np.column_stack(index) + 0.5) * self.h
+
+    def _chunk(self, c: int):
+        """Positions of the lattice points of chunk c (layers c·stride.. on) and which are
+        inside: blocks of LEVELS cells far from the boundary take their centre's side."""
+        index, P = self._points(c)
         far = getattr(self.solid, "far", None)
         if far is None:
             return P, self.solid.inside(P)
-        # blocks of SLAB^d cells, aligned on the lattice: those far from the surface take their centre's side
-        index = np.meshgrid(*[np.arange(len(a)) // SLAB for a in self.axes[:-1]],
-                            np.arange(k0, k1) // SLAB, indexing="ij")
-        blocks = [np.unique(i) for i in index]
-        shape = [len(b) for b in blocks]
-        local = np.ravel_multi_index([(i - b[0]).ravel(order="F") for i, b in zip(index, blocks)], shape, order="F")
-        centre_grids = np.meshgrid(*[self.origin[k] + (b + 0.5) * SLAB * self.h for k, b in enumerate(blocks)],
-                                   indexing="ij")
-        centres = np.column_stack([g.ravel(order="F") for g in centre_grids])
-        uniform = far(centres, 0.5 * SLAB * self.h * math.sqrt(self.dim))
-        side = np.zeros(len(centres), dtype=bool)
-        side[uniform] = self.solid.inside(centres[uniform])
-        inside = side[local]
-        near = ~uniform[local]
-        inside[near] = self.solid.inside(P[near])
+        inside = np.zeros(len(P), dtype=bool)
+        open_ = np.arange(len(P))
+        for size in LEVELS:
+            block = [i[open_] // size for i in index]
+            base = [b.min() for b in block]
+            shape = [int(b.max() - b0) + 1 for b, b0 in zip(block, base)]
+            key = np.ravel_multi_index([b - b0 for b, b0 in zip(block, base)], shape)
+            used = np.zeros(np.prod(shape), dtype=bool)
+            used[key] = True
+            ids = np.flatnonzero(used)
+            centre = self.origin + (np.column_stack(np.unravel_index(ids, shape)) + base + 0.5) * size * self.h
+            uniform = far(centre, 0.5 * size * self.h * math.sqrt(self.dim))
+            side = np.zeros(np.prod(shape), dtype=bool)
+            side[ids[uniform]] = self.solid.inside(centre[uniform])
+            done = np.zeros(np.prod(shape), dtype=bool)
+            done[ids[uniform]] = True
+            inside[open_] = side[key]
+            open_ = open_[~done[key]]
+        inside[open_] = self.solid.inside(P[open_])
         return P, inside
 
-    def _chunks(self, k0: int, k1: int):
-        for a in range(k0, k1, self.stride):
-            yield a, self._layers(a, min(a + self.stride, k1))
-
-    def _counts(self, k0: int, k1: int) -> np.ndarray:
-        counts = [np.zeros(0, np.int64)]
-        for a, (_, inside) in self._chunks(k0, k1):
-            counts.append(inside.reshape(-1, self.per_layer).sum(axis=1))
-        return np.concatenate(counts)
+    def _count(self, c: int) -> np.ndarray:
+        """Inside points per layer of chunk c (its mask kept for rows)."""
+        _, inside = self._chunk(c)
+        self._kept[c] = np.packbits(inside)
+        return inside.reshape(-1, self.per_layer).sum(axis=1)
 
     def rows(self, start: int, stop: int):
         if stop <= start:
             return np.zeros((0, self.dim)), np.zeros(0)
         first_layer = int(np.searchsorted(self.first, start, side="right")) - 1
         last_layer = int(np.searchsorted(self.first, stop - 1, side="right")) - 1
-        k0 = first_layer // SLAB * SLAB
-        k1 = min(int(self.n[-1]), (last_layer // SLAB + 1) * SLAB)
-        kept = [P[inside] for _, (P, inside) in self._chunks(k0, k1)]
-        offset = int(self.first[k0])
+        kept = []
+        for c in range(first_layer // self.stride, last_layer // self.stride + 1):
+            if c in self._kept:
+                P = self._points(c)[1]
+                inside = np.unpackbits(self._kept[c], count=len(P)).astype(bool)
+            else:
+                P, inside = self._chunk(c)
+            kept.append(P[inside])
+        offset = int(self.first[first_layer // self.stride * self.stride])
         positions = np.concatenate(kept)[start - offset:stop - offset]
         return positions, np.full(stop - start, self.each)
 
