@@ -10,6 +10,7 @@ a quarter disc, and 0.25 of the centroid's).
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -225,6 +226,21 @@ def meshes(tmp_path_factory):
     box = trimesh.creation.box(extents=[2.0, 2.0, 2.0])
     box.apply_translation([0.0, 0.0, 1.0])  # z in 0..2
     box.export(folder / "box.stl")
+    small = ico.copy()  # one triangle missing: a small hole
+    small.update_faces(np.arange(len(ico.faces)) != 5)
+    small.export(folder / "hole.stl")
+    cup = ico.copy()  # the top cut away: no inside
+    cup.update_faces(ico.triangles_center[:, 2] < 0.3)
+    cup.export(folder / "cup.stl")
+    inverted = ico.copy()
+    inverted.invert()
+    inverted.export(folder / "inverted.stl")
+    trimesh.Trimesh(np.vstack([ico.vertices, [[3, 0, 0], [4, 0, 0], [5, 0, 0]]]),
+                    np.vstack([ico.faces, [[642, 643, 644]]]), process=False).export(folder / "degenerate.stl")
+    (folder / "garbage.stl").write_text("not a mesh\n")
+    millimetres = ico.copy()
+    millimetres.apply_scale(1000.0)
+    millimetres.export(folder / "mm.stl")
     # as written: an STL holds single-precision vertices
     return {"folder": folder, "ico": trimesh.load_mesh(folder / "ico.stl"), "box": trimesh.load_mesh(folder / "box.stl")}
 
@@ -327,3 +343,68 @@ def test_a_surface_scene_is_the_same_on_1_and_3_ranks(tmp_path, meshes):
     assert fields[1]["volume"].sum() == pytest.approx(meshes["ico"].volume, rel=1e-12)
     for name in ("position", "volume", "gid"):
         assert np.array_equal(fields[1][name], fields[3][name]), name
+
+
+BAD_SURFACES = [
+    ("missing.stl", 0.1, r"file '.*missing.stl' not found"),
+    ("garbage.stl", 0.1, r"garbage.stl: holds no triangles"),
+    ("cup.stl", 0.1, r"cup.stl: the surface is not closed: \d+ boundary edge\(s\) \(holes\) within .* the inside "
+                     r"cannot be decided"),
+    ("inverted.stl", 0.1, r"inverted.stl: the surface encloses a volume of -.* normals point inwards"),
+    ("degenerate.stl", 0.1, r"degenerate.stl: 1 degenerate triangle\(s\) of zero area"),
+    ("mm.stl", 0.001, r"geometry.parts\[0\] \(.*mm.stl\): spacing 0.001 would fill .*a mesh in mm and a spacing in m\?"),
+]
+
+
+SELF_INTERSECTING = ('shape = "polygon"\nvertices = [[0, 0], [1, 1], [1, 0], [0, 1]]\nspacing = 0.1',
+                     r"geometry.parts\[0\] \(vertices, holes\) is not a simple polygon: self-intersection at "
+                     r"\(0.5, 0.5\)")
+
+
+def bad_scenes(tmp_path, meshes):
+    """[(scene path, output directory, pattern of the message)] of every bad solid."""
+    cases = []
+    for i, (name, spacing, message) in enumerate(BAD_SURFACES):
+        scene = tmp_path / f"bad{i}.toml"
+        scene.write_text(SCENE_3D.format(part=f'shape = "surface"\nfile = "{meshes["folder"] / name}"\n'
+                                              f'spacing = {spacing}'))
+        cases.append((str(scene), str(tmp_path / f"out{i}"), message))
+    scene = tmp_path / "polygon.toml"
+    scene.write_text(SCENE_2D.format(part=SELF_INTERSECTING[0]))
+    return cases + [(str(scene), str(tmp_path / "out"), SELF_INTERSECTING[1])]
+
+
+def test_bad_solids_exit_2_with_the_file_and_the_problem(tmp_path, meshes, capsys):
+    from parsph.cli import main
+    for scene, out, message in bad_scenes(tmp_path, meshes):
+        assert main(["preview", scene, "--out", out]) == 2
+        err = capsys.readouterr().err
+        assert err.count("parsph: error:") == 1 and re.search(message, err), err
+
+
+@pytest.mark.mpi
+def test_bad_solids_exit_2_on_2_ranks(tmp_path, meshes):
+    """Every case in one launch (the CLI's main in turn), and one as its own job."""
+    import json
+    import subprocess
+    import sys
+
+    from conftest import CEILING, ROOT, mpiexec, parsph
+    cases = bad_scenes(tmp_path, meshes)
+    (tmp_path / "cases.json").write_text(json.dumps(cases))
+    proc = subprocess.run([mpiexec(), "-n", "2", sys.executable, str(ROOT / "tests" / "mpi" / "solids_check.py"),
+                           str(tmp_path / "cases.json")], capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
+    assert proc.returncode == 0 and "OK" in proc.stdout, proc.stdout + proc.stderr
+    scene, out, message = cases[2]  # the open cup
+    proc = parsph(["preview", scene, "--out", out], ranks=2)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.count("parsph: error:") == 1 and re.search(message, proc.stderr), proc.stderr
+
+
+def test_a_small_hole_is_survived_with_a_warning(meshes):
+    warnings = []
+    g = fill({"shape": "surface", "file": str(meshes["folder"] / "hole.stl"), "spacing": 0.1}, "part", 3,
+             warn=warnings.append)
+    assert len(warnings) == 1 and re.search(r"not closed: 3 boundary edge\(s\).*winding number", warnings[0])
+    assert g.volume == pytest.approx(meshes["ico"].volume, rel=1e-12)  # the hole filled (a flat triangle)
+    assert g.rows(0, g.count)[1].sum() == pytest.approx(g.volume, rel=1e-12)

@@ -40,6 +40,7 @@ class Fill:
         if solid.volume is not None:
             estimate = solid.volume / h ** self.dim
             if not estimate <= MAX_PARTICLES:
+                name += f" ({solid.path})" if hasattr(solid, "path") else ""
                 raise ValueError(f"{name}: spacing {h:g} would fill the volume {solid.volume:.4g} with about "
                                  f"{estimate:.3g} particles, more than 2^31; are the geometry's units and the "
                                  "spacing's the same (a mesh in mm and a spacing in m?)")

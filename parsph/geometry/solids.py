@@ -379,6 +379,8 @@ class Affine:
 
     def __init__(self, solid, A, t):
         self.solid, self.A, self.t = solid, A, t
+        if hasattr(solid, "path"):
+            self.path = solid.path
         self.inverse = np.linalg.inv(A)
         det = abs(float(np.linalg.det(A)))
         self.volume = None if solid.volume is None else solid.volume * det
