@@ -328,18 +328,20 @@ def preview_particles(out):
 
 
 @pytest.mark.mpi
-def test_a_surface_scene_is_the_same_on_1_and_3_ranks(tmp_path, meshes):
+def test_a_packed_surface_scene_is_the_same_on_1_and_3_ranks(tmp_path, meshes):
     from conftest import parsph
     import shutil
     shutil.copy(meshes["folder"] / "ico.stl", tmp_path / "ico.stl")
     scene = tmp_path / "solid.toml"
-    scene.write_text(SCENE_3D.format(part='shape = "surface"\nfile = "ico.stl"\nspacing = 0.1'))
+    scene.write_text(SCENE_3D.format(part='shape = "surface"\nfile = "ico.stl"\nspacing = 0.05\npack = true\n'
+                                          'pack_iterations = 5'))
     fields = {}
     for ranks in (1, 3):
         proc = parsph(["preview", scene, "--out", tmp_path / f"r{ranks}"], ranks=ranks)
         assert proc.returncode == 0, proc.stderr
         assert "geometry.parts[0]: " in proc.stdout and "lattice volume error" in proc.stdout
         fields[ranks] = preview_particles(tmp_path / f"r{ranks}")
+    assert len(fields[1]["gid"]) > 30000  # 40 layers: 3 chunks of 16 layers, one a rank
     assert fields[1]["volume"].sum() == pytest.approx(meshes["ico"].volume, rel=1e-12)
     for name in ("position", "volume", "gid"):
         assert np.array_equal(fields[1][name], fields[3][name]), name
@@ -408,3 +410,24 @@ def test_a_small_hole_is_survived_with_a_warning(meshes):
     assert len(warnings) == 1 and re.search(r"not closed: 3 boundary edge\(s\).*winding number", warnings[0])
     assert g.volume == pytest.approx(meshes["ico"].volume, rel=1e-12)  # the hole filled (a flat triangle)
     assert g.rows(0, g.count)[1].sum() == pytest.approx(g.volume, rel=1e-12)
+
+
+@pytest.mark.parametrize("part, dim", [(PLATE, 2), ({"shape": "sphere", "center": [0, 0, 0], "radius": 1.0,
+                                                     "spacing": 0.1}, 3)])
+def test_packing_smooths_the_boundary_and_keeps_count_and_volumes(part, dim):
+    """Packed: every particle at least h/2 inside, the outer layer's distances to the
+    surface less spread than the lattice's staircase, no two particles closer than h/2."""
+    from scipy.spatial import cKDTree
+
+    from parsph.geometry.pack import boundary
+    h = part["spacing"]
+    lattice, packed = fill(part, "part", dim), fill(dict(part, pack=True, pack_iterations=10), "part", dim)
+    X0, V0 = lattice.rows(0, lattice.count)
+    X, V = packed.rows(0, packed.count)
+    assert packed.count == lattice.count and np.array_equal(V, V0)
+    distance = boundary(packed.solid)
+    d0, d = distance(X0)[0], distance(X)[0]
+    assert d.max() <= -0.5 * h * (1 - 1e-9)
+    assert np.std(d[d > -h]) < 0.6 * np.std(d0[d0 > -h])
+    assert cKDTree(X).query(X, k=2)[0][:, 1].min() > 0.5 * h
+    assert np.array_equal(X[d0 < -4 * h], X0[d0 < -4 * h])  # the inside stays on the lattice

@@ -21,11 +21,14 @@ import numpy as np
 
 from parsph.parallel.runtime import collective
 
+from . import pack
 from .lattice import MAX_PARTICLES
 from .solids import solid
 
 LEVELS = (16, 4, 2)  # block sizes (cells per side) classified at once when far from a surface
 CHUNK = 1 << 20  # lattice points classified at once (about)
+CHUNKS = 8  # a solid of many layers is classified in at least this many chunks
+PACK_ITERATIONS = 20  # packing's relaxation steps unless a part says
 
 
 class Fill:
@@ -34,7 +37,7 @@ class Fill:
 
     blockwise = True  # rows(start, stop) builds only those rows
 
-    def __init__(self, solid, h: float, name: str, comm=None):
+    def __init__(self, solid, h: float, name: str, comm=None, pack: int = 0):
         self.solid, self.h, self.dim = solid, h, solid.dim
         lo, hi = solid.bounds
         if solid.volume is not None:
@@ -52,9 +55,10 @@ class Fill:
         self.origin = 0.5 * (lo + hi) - 0.5 * self.n * h
         self.axes = [self.origin[k] + (np.arange(self.n[k]) + 0.5) * h for k in range(self.dim)]
         self.per_layer = int(np.prod(self.n[:-1]))
-        top = LEVELS[0]
-        self.stride = top * max(1, CHUNK // (self.per_layer * top))  # layers per chunk, on the blocks
-        chunks = -(-int(self.n[-1]) // self.stride)
+        top, layers = LEVELS[0], int(self.n[-1])
+        # layers per chunk: on the blocks, about CHUNK points, and CHUNKS chunks or more for the ranks to share
+        self.stride = top * max(1, min(CHUNK // (self.per_layer * top), -(-layers // (top * CHUNKS))))
+        chunks = -(-layers // self.stride)
         cuts = np.linspace(0, chunks, (comm.size if comm else 1) + 1).round().astype(np.int64)
         rank = comm.rank if comm else 0
         self._kept = {}  # chunk -> packed inside mask, of the chunks this rank counted
@@ -69,6 +73,26 @@ class Fill:
         self.lattice_volume = self.count * h ** self.dim
         self.volume = solid.volume if solid.volume is not None else self.lattice_volume
         self.each = self.volume / self.count
+        self.packed = self._pack(range(cuts[rank], cuts[rank + 1]), pack, name, comm) if pack else None
+
+    def _pack(self, chunks, iterations: int, name: str, comm):
+        """(global ids, packed positions) of the boundary layer (geometry.pack), each rank
+        finding the layer's particles in its chunks."""
+        distance = pack.boundary(self.solid)
+        with collective(comm) if comm else contextlib.nullcontext():
+            mine = []
+            for c in chunks:
+                P = self._points(c)[1]
+                P = P[np.unpackbits(self._kept[c], count=len(P)).astype(bool)]
+                d = distance(P)[0]
+                near = np.flatnonzero(d > -pack.NEIGHBOURS * self.h)
+                mine.append((self.first[c * self.stride] + near, P[near], d[near] > -pack.BAND * self.h))
+        layer = sum(comm.allgather(mine), []) if comm else mine
+        gid, X, mobile = (np.concatenate([item[k] for item in layer]) for k in range(3))
+        if len(gid) > pack.LIMIT:
+            raise ValueError(f"{name}: pack: the boundary layer holds {len(gid)} particles, more than "
+                             f"{pack.LIMIT} (every rank packs it whole); use a larger spacing or pack = false")
+        return gid, pack.relax(X, mobile, self.h, distance, iterations)
 
     def report(self) -> str:
         """The count and the lattice's volume error, for the set-up output."""
@@ -132,9 +156,14 @@ class Fill:
             kept.append(P[inside])
         offset = int(self.first[first_layer // self.stride * self.stride])
         positions = np.concatenate(kept)[start - offset:stop - offset]
+        if self.packed is not None:
+            gid, X = self.packed
+            a, b = np.searchsorted(gid, [start, stop])
+            positions[gid[a:b] - start] = X[a:b]
         return positions, np.full(stop - start, self.each)
 
 
 def fill(part: dict, name: str, dim: int, comm=None, warn=lambda message: None) -> Fill:
-    """The Fill of a solid part table (solids.solid) at its spacing."""
-    return Fill(solid(part, name, dim, warn), part["spacing"], name, comm)
+    """The Fill of a solid part table (solids.solid) at its spacing, packed if it says so."""
+    iterations = part.get("pack_iterations", PACK_ITERATIONS) if part.get("pack") else 0
+    return Fill(solid(part, name, dim, warn), part["spacing"], name, comm, iterations)
