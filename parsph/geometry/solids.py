@@ -339,7 +339,7 @@ class Surface:
         self.path = path
         self._mesh = mesh
         if self.closed:  # off a closed surface the winding number is constant in a ball
-            self.far = self._far
+            self.far, self._tree = self._far, None
 
     def _ambiguous(self):
         """Fraction of a PROBES^3 lattice over the box whose winding number is ambiguous,
@@ -362,9 +362,10 @@ class Surface:
         """Points farther than r from the surface (for a closed surface, their whole ball is
         inside or outside with them)."""
         import igl
-        d = igl.signed_distance(np.ascontiguousarray(P, dtype=np.float64), self.V, self.F,
-                                igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_UNSIGNED, 0.0, 2.0 * r)[0]
-        return np.abs(d) > r
+        if self._tree is None:
+            self._tree = igl.AABB()
+            self._tree.init(self.V, self.F)
+        return self._tree.squared_distance(self.V, self.F, np.ascontiguousarray(P, dtype=np.float64))[0] > r * r
 
     def mesh(self):
         return self._mesh.copy()
@@ -379,6 +380,8 @@ class Affine:
 
     def __init__(self, solid, A, t):
         self.solid, self.A, self.t = solid, A, t
+        if hasattr(solid, "path"):
+            self.path = solid.path
         self.inverse = np.linalg.inv(A)
         det = abs(float(np.linalg.det(A)))
         self.volume = None if solid.volume is None else solid.volume * det
