@@ -47,15 +47,16 @@ def test_without_the_hole_the_quarter_carries_the_traction_uniformly():
 
 
 def test_the_stress_at_the_hole_is_roarks_concentration_factor():
-    """The quarter with its hole (spacing d/10, 1230 particles) at rest: the mean sigma_yy
-    of the particles 3 to 5 spacings below the loaded edge is the traction to 1 % (measured
-    0.9997); the stress at the hole's edge, from Michell's traction-free solution fitted to
-    the particles 1 to 6 spacings from it, is Roark's K_tn = 2.508 at d/W = 0.2 times the
-    net-section stress to 2 % (measured 2.5177, +0.4 %; other bands and harmonics move it
-    by about 1 %, and a finite-element solution of this plate gives 2.525), and the fit
-    takes Kirsch's field at the same particles exactly. The particle nearest the edge, a
-    tenth of the radius inside, carries less (1.91; Kirsch's stress there is 0.81 of the
-    edge's)."""
+    """The quarter with its hole (spacing d/10, 1230 particles, the boundary layer packed)
+    at rest: the mean sigma_yy of the particles 3 to 5 spacings below the loaded edge is the
+    traction to 1 % (measured 0.9997); the stress at the hole's edge, from Michell's
+    traction-free solution fitted to the particles 1 to 6 spacings from it, is Roark's
+    K_tn = 2.508 at d/W = 0.2 times the net-section stress to 2 % (measured 2.5258, +0.7 %;
+    a finite-element solution of this plate gives 2.5247, Roark's fit of Howland's solution
+    is 0.6 % below it; other bands and harmonics of the fit move it by 1 %, and d/20 and d/40
+    give 2.528 and 2.525), and the fit takes Kirsch's field at the same particles exactly.
+    The particle nearest the edge, a tenth of the radius inside, carries less: 1.86 (the
+    finite-element stress there is 2.00; Kirsch's is 0.81 of the edge's)."""
     sim, last = at_rest(["parameters.n=10"])
     assert last["kinetic_energy"] < 1e-8 * last["strain_energy"]
     f = kirsch_figures(sim.scene, sim.quantity("reference_position"), sim.quantity("cauchy_stress"),
