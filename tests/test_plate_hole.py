@@ -14,9 +14,20 @@ from conftest import ROOT
 from physics import run_until, simulation
 
 sys.path.insert(0, str(ROOT / "tools"))
-from measure import kirsch_figures  # noqa: E402
+from measure import edge_fit, kirsch_figures, kirsch_polar, michell_terms  # noqa: E402
 
 S = 2.0e7  # the scene's traction [Pa]
+
+
+def test_michells_terms_are_free_of_traction_on_the_hole_and_hold_kirschs_field():
+    """Each of Michell's terms (cos n theta, n <= 8) has sigma_rr = sigma_rt = 0 on r = a, and
+    the fit to Kirsch's field at random points 1 to 3 radii out gives its edge stress 3."""
+    theta = np.linspace(0.0, np.pi / 2, 7)
+    for term in michell_terms(np.ones(7), theta, 8):
+        assert np.abs(term[[0, 2]]).max() < 1e-12 * np.abs(term).max()
+    rng = np.random.default_rng(0)
+    rho, theta = rng.uniform(1.0, 3.0, 60), rng.uniform(0.0, np.pi / 2, 60)
+    assert edge_fit(rho, theta, kirsch_polar(rho, theta)) == pytest.approx(3.0, rel=1e-12)
 
 
 def at_rest(overrides: list):
