@@ -174,8 +174,10 @@ def kirsch_figures(scene: dict, X: np.ndarray, sigma: np.ndarray, measure: np.nd
     return {
         "ratio": ratio, "load": load, "nominal": nominal, "traction": traction,
         "kinetic_ratio": kinetic / strain,
-        "far": far_mean / traction, "far_spread": (sigma[far, 1, 1].min() / far_mean, sigma[far, 1, 1].max() / far_mean),
-        "nearest": sigma[nearest, 1, 1] / nominal, "nearest_rho": rho[nearest], "nearest_theta": np.degrees(theta[nearest]),
+        "far": far_mean / traction,
+        "far_spread": (sigma[far, 1, 1].min() / far_mean, sigma[far, 1, 1].max() / far_mean),
+        "nearest": sigma[nearest, 1, 1] / nominal, "nearest_rho": rho[nearest],
+        "nearest_theta": np.degrees(theta[nearest]),
         "nearest_kirsch": kirsch_polar(rho[nearest], 0.0)[1] / 3.0,
         "fit": edge, "fit_count": count,
         "fit_on_kirsch": fit(FIT_BAND, field=kirsch_polar(rho, theta))[0] / 3.0 - 1.0,
