@@ -139,18 +139,25 @@ def test_rows_in_blocks_equal_the_whole():
     assert np.array_equal(np.concatenate([g.rows(a, b)[0] for a, b in zip(cuts, cuts[1:])]), X)
 
 
-def test_outline_file_csv_and_dxf_relative_to_the_scene(tmp_path):
+def test_outline_files_csv_dxf_svg_relative_to_the_scene(tmp_path):
+    """A CSV outline; DXF and SVG outlines with a hole (their units as written)."""
+    import shapely
     import trimesh
     square = np.array([[0, 0], [0.1, 0], [0.1, 0.05], [0, 0.05]])
     np.savetxt(tmp_path / "plate.csv", square, delimiter=",")
-    path = trimesh.load_path(np.vstack([square, square[:1]]))
-    (tmp_path / "plate.dxf").write_text(trimesh.path.exchange.dxf.export_dxf(path))
-    for name in ("plate.csv", "plate.dxf"):
+    plate = shapely.Polygon(square * 1000, [[(40, 15), (60, 15), (60, 35), (40, 35)]])  # in mm
+    (tmp_path / "plate.dxf").write_text(trimesh.path.exchange.dxf.export_dxf(trimesh.load_path(plate)))
+    (tmp_path / "plate.svg").write_text('<svg xmlns="http://www.w3.org/2000/svg"><path d="M 0 0 L 100 0 L 100 50 '
+                                        'L 0 50 Z M 40 15 L 60 15 L 60 35 L 40 35 Z"/></svg>')
+    v, c, M = rectangle([0.04, 0.015], [0.06, 0.035])
+    holed = combine([rectangle([0, 0], [0.1, 0.05]), (-v, c, -M)])
+    for name, exact in (("plate.csv", rectangle([0, 0], [0.1, 0.05])), ("plate.dxf", holed), ("plate.svg", holed)):
         scene = tmp_path / "s.toml"
-        scene.write_text(SCENE_2D.format(part=f'shape = "polygon"\nfile = "{name}"\nspacing = 0.005'))
+        scale = "" if name.endswith("csv") else "\nscale = 0.001"
+        scene.write_text(SCENE_2D.format(part=f'shape = "polygon"\nfile = "{name}"\nspacing = 0.0025{scale}'))
         part = config.load(str(scene))["geometry"]["parts"][0]
         assert part["file"] == str(tmp_path / name)
-        check(part, rectangle([0, 0], [0.1, 0.05]))
+        check(part, exact)
 
 
 SCENE_2D = """[scene]

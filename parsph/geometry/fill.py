@@ -53,7 +53,6 @@ class Fill:
                              "lattice to classify; use a larger spacing")
         self.n = np.maximum(1, np.ceil(span * (1.0 - 1e-12))).astype(np.int64)
         self.origin = 0.5 * (lo + hi) - 0.5 * self.n * h
-        self.axes = [self.origin[k] + (np.arange(self.n[k]) + 0.5) * h for k in range(self.dim)]
         self.per_layer = int(np.prod(self.n[:-1]))
         top, layers = LEVELS[0], int(self.n[-1])
         # layers per chunk: on the blocks, about CHUNK points, and CHUNKS chunks or more for the ranks to share

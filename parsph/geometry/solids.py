@@ -165,11 +165,6 @@ class Region:
     def inside(self, P):
         return shapely.contains_xy(self.geom, P[:, 0], P[:, 1])
 
-    def distance(self, P):
-        """Signed distance to the boundary, negative inside."""
-        d = shapely.distance(self.geom.boundary, shapely.points(P))
-        return np.where(self.inside(P), -d, d)
-
 
 def _given(part):
     """The part's keys that are given (a resolved part holds None for the absent ones)."""
@@ -213,6 +208,8 @@ def _children(part, name):
 # ---------------------------------------------------------------- 3D solids
 
 class Sphere:
+    """A ball."""
+
     def __init__(self, center, radius):
         self.center, self.radius = center, radius
         self.volume = 4.0 / 3.0 * math.pi * radius ** 3
@@ -224,7 +221,7 @@ class Sphere:
     def mesh(self):
         import trimesh
         m = trimesh.creation.icosphere(subdivisions=6, radius=1.0)
-        m.apply_scale(self.radius * (self.volume / (m.volume * self.radius ** 3)) ** (1.0 / 3.0))
+        m.apply_scale(self.radius * (4.0 / 3.0 * math.pi / m.volume) ** (1.0 / 3.0))  # the exact volume
         m.apply_translation(self.center)
         return m
 
