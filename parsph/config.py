@@ -167,9 +167,18 @@ PART_KEYS: dict[str, dict[str, Key]] = {
         "radial": Key("int", REQUIRED, positive, "rows of particles, from the inner to the outer surface"),
         "angular": Key("int", REQUIRED, positive, "particles per row"),
     },
+    "mesh": {  # a finite-element mesh: a particle per element (geometry.mesh_parts)
+        "file": Key("str", REQUIRED, doc="the mesh file (Gmsh .msh, Abaqus .inp, VTK .vtu, ... as meshio reads "
+                                         "them), relative to the scene file's directory: a particle at each "
+                                         "element's centroid with its volume"),
+        "scale": Key("float", 1.0, positive, "factor on the mesh's coordinates (1e-3 for a mesh in mm)"),
+        "translate": Key("vector", None, doc="added to the scaled coordinates [m]"),
+        "cells": Key("strlist", None, doc="only the elements of these mesh sets (default: all the elements of "
+                                          "the scene's dimension)"),
+    },
 }
 PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,),
-                   "polar_ring": (2,)}
+                   "polar_ring": (2,), "mesh": (2, 3)}
 
 BC_KEYS = {
     "type": Key("str", REQUIRED, one_of("fixed", "velocity", "displacement"),
@@ -251,7 +260,7 @@ CONTACT_KEYS = {
     "self_contact": Key("bool", False, None, "bodies names one body twice: its particles that are not kernel "
                                              "neighbours touch (crack faces, folds)"),
 }
-GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
+GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme", "mesh_set")
 GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.select), for the reference
     "all": Key("bool", None, doc="true: every particle"),
     "box": Key("table", None, doc="{ lower = [...], upper = [...] }: the particles in the closed box [m]"),
@@ -263,6 +272,11 @@ GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.s
     "extreme": Key("table", None, doc="{ axis = k, side = \"min\" or \"max\", tolerance = t }: the particles "
                                       "within t of the smallest or largest coordinate k (t: default half the "
                                       "median particle size) [m]"),
+    "mesh_set": Key("str", None, doc="the particles of a set of a mesh part's file: its elements (a Gmsh "
+                                     "physical group, an Abaqus element set, KEY=VALUE of integer cell data), "
+                                     "or the elements touching its nodes (an Abaqus node set, a set of faces)"),
+    "mesh_part": Key("int", 0, non_negative, "with mesh_set: which of the scene's mesh parts (0: the first, "
+                                             "counted over the bodies in order)"),
     "invert": Key("bool", False, doc="take the particles the selector does not"),
 }
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
@@ -403,7 +417,8 @@ def _validate_material(path: str, mat: dict) -> None:
                          f"are not finite positive numbers in double precision ({given})")
 
 
-def _validate_groups(raw: Any, dim: int) -> dict:
+def _validate_groups(raw: Any, dim: int, meshes: int) -> dict:
+    """The [groups.NAME] tables (`meshes`: the number of mesh parts mesh_set may name)."""
     if raw is None:
         raw = {}
     if not isinstance(raw, dict):
@@ -413,12 +428,20 @@ def _validate_groups(raw: Any, dim: int) -> dict:
         path = f"groups.{name}"
         if not isinstance(spec, dict):
             raise InputError(f"{path} must be a table")
-        selectors = [k for k in spec if k != "invert"]
+        selectors = [k for k in spec if k not in ("invert", "mesh_part")]
         for k in selectors:
             if k not in GROUP_SELECTORS:
-                raise InputError(f"unknown key '{path}.{k}'{_suggest(k, GROUP_SELECTORS + ('invert',))}")
+                raise InputError(f"unknown key '{path}.{k}'{_suggest(k, GROUP_SELECTORS + ('invert', 'mesh_part'))}")
         if len(selectors) != 1:
             raise InputError(f"{path} needs exactly one of {', '.join(GROUP_SELECTORS)}")
+        if "mesh_set" in spec or "mesh_part" in spec:
+            if "mesh_set" not in spec:
+                raise InputError(f"{path}.mesh_part goes with mesh_set")
+            spec = dict(spec, **{k: _coerce(f"{path}.{k}", GROUP_KEYS[k], spec.get(k, GROUP_KEYS[k].default), dim)
+                                 for k in ("mesh_set", "mesh_part")})
+            if spec["mesh_part"] >= meshes:
+                raise InputError(f"{path}.mesh_part = {spec['mesh_part']}: the scene has {meshes} part(s) of "
+                                 "shape 'mesh'" + (" (counted from 0)" if meshes else ""))
         groups[name] = spec
     return groups
 
@@ -784,7 +807,8 @@ def validate(raw: dict) -> dict:
         scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
         _validate_material("material", scene["material"])
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
-    scene["groups"] = _validate_groups(raw.get("groups"), dim)
+    scene["groups"] = _validate_groups(raw.get("groups"), dim,
+                                       sum(p["shape"] == "mesh" for b in bodies(scene) for p in b["parts"]))
     _validate_lists(scene, raw, dim)
     for body in bodies(scene):
         model = failure_of(body["material"])
@@ -950,11 +974,25 @@ def _read(path: str) -> dict:
         raise InputError(f"scene file {path} is not valid TOML: arrays or tables nested too deeply") from None
 
 
+def _anchor_files(raw: dict, directory: str) -> None:
+    """Make the relative `file` of each mesh part of a raw scene relative to `directory`
+    (the scene file's), in place."""
+    tables = [raw.get("geometry")] + [b for b in raw.get("bodies", ()) if isinstance(b, dict)]
+    for table in tables:
+        parts = table.get("parts") if isinstance(table, dict) else None
+        for part in parts if isinstance(parts, list) else ():
+            if isinstance(part, dict) and part.get("shape") == "mesh" and isinstance(part.get("file"), str) \
+                    and not os.path.isabs(part["file"]):
+                part["file"] = os.path.normpath(os.path.join(directory, part["file"]))
+
+
 def load(path: str, overrides: list[str] = ()) -> dict:
-    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene."""
+    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene (a
+    mesh part's file relative to the scene file's directory made absolute)."""
     raw = _read(path)
     for text in overrides:
         apply_override(raw, *parse_override(text))
+    _anchor_files(raw, os.path.dirname(os.path.abspath(path)))
     return validate(raw)
 
 
