@@ -13,6 +13,15 @@
                                its spread (standard deviation over |mean|) around the ring.
   tools/measure.py drained OUT the funnel (runs/funnel.toml): at each snapshot, the share of
                                the fluid's mass below y = 0, through the opening.
+  tools/measure.py specimen OUT a specimen from a mesh pulled by its grips to failure
+                               (runs/specimen_mesh.toml: the mesh sets grip_top, grip_bottom,
+                               pulled along y; probes top and bottom, the grips' displacements,
+                               and max_damage): the first failure (history: time, elongation
+                               top - bottom in mm and in per cent of the grips' distance; the
+                               failed particles' reference y at the next snapshot), and the
+                               through-crack: the first snapshot where no chain of intact
+                               elements sharing faces joins the grips (time, elongation, the
+                               failed elements' reference y: median and interquartile range).
 """
 
 from __future__ import annotations
@@ -24,7 +33,9 @@ import scipy.sparse as sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from parsph.io import read_snapshots
+from parsph.geometry.mesh_parts import MeshPart
+from parsph.io import read_history, read_snapshots
+from parsph.io.output_dir import held_scene
 
 
 def snapshots(out: str):
@@ -80,7 +91,68 @@ def drained(out: str) -> None:
         print(f"t = {t:.4g} s: {below.mean():.3f} of the fluid below the opening")
 
 
-COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained}
+def face_graph(part: MeshPart) -> sparse.csr_matrix:
+    """Adjacency of the part's particles (elements, in its order) that share a face (at
+    least as many nodes as the dimension)."""
+    rows, cols = [], []
+    for b, start, _ in part.blocks:
+        data = np.asarray(part.mesh.cells[b].data)
+        rows.append(np.repeat(np.arange(start, start + len(data)), data.shape[1]))
+        cols.append(data.ravel())
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    incidence = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(part.total, len(part.mesh.points)))
+    shared = (incidence @ incidence.T).tocsr()[part.selected][:, part.selected]
+    shared.data = (shared.data >= part.dim).astype(np.float64)
+    shared.setdiag(0.0)
+    shared.eliminate_zeros()
+    return shared
+
+
+def specimen(out: str) -> None:
+    scene = held_scene(out)
+    mesh = scene["geometry"]["parts"][0]
+    part = MeshPart(mesh["file"], mesh["scale"], mesh["translate"], mesh["cells"], scene["scene"]["dimension"])
+    top, bottom = part.set_mask("grip_top"), part.set_mask("grip_bottom")
+    corners = np.concatenate([c for _, _, c in part.blocks])[part.selected]
+    gap = part.points[corners[top], 1].min() - part.points[corners[bottom], 1].max()
+    h = read_history(out)
+    elongation = h["top"] - h["bottom"]
+
+    def at(t):
+        e = float(np.interp(t, h["time"], elongation))
+        return f"elongation {1e3 * e:.3f} mm ({100 * e / gap:.2f} % of the {1e3 * gap:.1f} mm between the grips)"
+
+    print(f"peak force {h['force'].max():.4g} N at t = {h['time'][np.argmax(h['force'])]:.4g} s, {at(h['time'][np.argmax(h['force'])])}")
+    failed_rows = np.flatnonzero(h["max_damage"] >= 1.0)
+    if not failed_rows.size:
+        print("no particle fails")
+        return
+    t_first = h["time"][failed_rows[0]]
+    print(f"first failure at t = {t_first:.4g} s, {at(t_first)}")
+    graph = face_graph(part)
+    reported = False
+    for t, s in snapshots(out):
+        order = np.argsort(s["gid"])
+        failed = s["damage"][order] >= 1.0
+        if not failed.any():
+            continue
+        Y = (s["position"] - s["displacement"])[order, 1]
+        if not reported:
+            print(f"  failed particles at t = {t:.4g} s: {failed.sum()}, reference y {1e3 * Y[failed].min():.2f} to "
+                  f"{1e3 * Y[failed].max():.2f} mm")
+            reported = True
+        intact = np.flatnonzero(~failed)
+        _, label = connected_components(graph[intact][:, intact], directed=False)
+        joined = np.intersect1d(label[top[intact]], label[bottom[intact]])
+        if not joined.size:
+            q = np.percentile(1e3 * Y[failed], [25, 50, 75])
+            print(f"through-crack at t = {t:.4g} s (first snapshot with the grips apart), {at(t)}; "
+                  f"{failed.sum()} failed particles, reference y median {q[1]:.2f} mm (quartiles {q[0]:.2f}, {q[2]:.2f})")
+            return
+    print("no through-crack by the last snapshot")
+
+
+COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "specimen": specimen}
 
 if __name__ == "__main__":
     if len(sys.argv) != 3 or sys.argv[1] not in COMMANDS:

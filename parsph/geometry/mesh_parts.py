@@ -77,9 +77,10 @@ def volumes_and_centroids(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 class MeshPart:
     """The elements of dimension `dimension` of the mesh `file` (optionally only those of the
-    mesh sets `cells`), scaled by `scale` about the origin then translated by `translate`:
-    `count` particles, in the file's order (cell block after cell block), at the elements'
-    centroids with their volumes; `spacing` is the mean (volume / count)^(1/D)."""
+    mesh sets `cells`), scaled by `scale` about the origin then translated by `translate`
+    (`points`, the nodes so placed): `count` particles, in the file's order (cell block after
+    cell block), at the elements' centroids with their volumes; `spacing` is the mean
+    (volume / count)^(1/D)."""
 
     blockwise = True  # rows(start, stop) slices the elements read
 
@@ -130,6 +131,7 @@ class MeshPart:
         x = points[:, :dimension] * float(scale)
         if translate is not None:
             x = x + np.asarray(translate, np.float64)
+        self.points = x
         volume, centroid = np.zeros(self.total), np.zeros((self.total, dimension))
         for b, start, corners in self.blocks:
             v, c = volumes_and_centroids(x[corners])
