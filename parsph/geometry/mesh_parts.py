@@ -19,6 +19,8 @@ whose signed volume is zero or of the other sign than most of its block's is inv
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import os
 
@@ -91,7 +93,8 @@ class MeshPart:
         if not os.path.isfile(file):
             raise ValueError(f"mesh file not found: {file}")
         try:
-            mesh = meshio.read(file)
+            with contextlib.redirect_stdout(io.StringIO()):  # meshio prints the formats it failed to read as
+                mesh = meshio.read(file)
         except Exception as exc:  # meshio's readers raise anything on a damaged file
             raise ValueError(f"mesh file {file} cannot be read: {type(exc).__name__}: {exc}") from None
         self.mesh = mesh
