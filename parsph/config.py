@@ -439,9 +439,11 @@ def _validate_groups(raw: Any, dim: int, meshes: int) -> dict:
                 raise InputError(f"{path}.mesh_part goes with mesh_set")
             spec = dict(spec, **{k: _coerce(f"{path}.{k}", GROUP_KEYS[k], spec.get(k, GROUP_KEYS[k].default), dim)
                                  for k in ("mesh_set", "mesh_part")})
+            if not meshes:
+                raise InputError(f"{path}.mesh_set needs a part of shape 'mesh'")
             if spec["mesh_part"] >= meshes:
                 raise InputError(f"{path}.mesh_part = {spec['mesh_part']}: the scene has {meshes} part(s) of "
-                                 "shape 'mesh'" + (" (counted from 0)" if meshes else ""))
+                                 "shape 'mesh' (counted from 0)")
         groups[name] = spec
     return groups
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import filecmp
 import itertools
 import math
+import re
+import tomllib
 
 import meshio
 import numpy as np
@@ -281,6 +283,24 @@ def test_an_unknown_set_is_refused_naming_the_file_and_its_sets(tmp_path):
                                                    point_sets={"N": left}))
     with pytest.raises(InputError, match=r"groups\.g: mesh file .*bar\.inp has no set 'B'; its sets: A, N"):
         groups_of(scene_file(tmp_path, "bar.inp", {"g": 'mesh_set = "B"'}))
+
+
+@pytest.mark.parametrize("spec, message", [
+    ('mesh_set = "A"\nmesh_part = 1', "groups.g.mesh_part = 1: the scene has 1 part(s) of shape 'mesh'"),
+    ('all = true\nmesh_part = 0', "groups.g.mesh_part goes with mesh_set"),
+    ('mesh_set = 3', "groups.g.mesh_set must be a string"),
+])
+def test_mesh_set_groups_are_checked_with_the_scene(spec, message, tmp_path):
+    with pytest.raises(InputError, match=re.escape(message)):
+        config.load(str(scene_file(tmp_path, "bar.inp", {"g": spec})))
+
+
+def test_a_mesh_set_needs_a_mesh_part():
+    raw = tomllib.loads(SCENE.format(file="x", extra=""))
+    raw["geometry"]["parts"] = [{"shape": "box", "lower": [0, 0, 0], "upper": [1, 1, 1], "spacing": 0.5}]
+    raw["groups"] = {"g": {"mesh_set": "A"}}
+    with pytest.raises(InputError, match="groups.g.mesh_set needs a part of shape 'mesh'"):
+        config.validate(raw)
 
 
 def test_a_count_above_the_particle_limit_is_refused(tmp_path, monkeypatch):

@@ -184,7 +184,8 @@ class MeshPart:
     def _elements_of(self, name: str) -> np.ndarray:
         """Mask over all the part's elements (before `cells`) of the set `name`: its elements
         of the scene's dimension, and those touching a node of its nodes or of its elements of
-        lower dimension (faces, edges)."""
+        lower dimension (faces, edges). A name that is both an element set and a node set
+        (Abaqus allows it) is the element set."""
         mesh = self.mesh
         members = {}  # cell block -> mask of its cells in the set
         nodes = np.zeros(len(mesh.points), bool)
