@@ -15,13 +15,14 @@
                                the fluid's mass below y = 0, through the opening.
   tools/measure.py specimen OUT a specimen from a mesh pulled by its grips to failure
                                (runs/specimen_mesh.toml: the mesh sets grip_top, grip_bottom,
-                               pulled along y; probes top and bottom, the grips' displacements,
-                               and max_damage): the first failure (history: time, elongation
+                               pulled apart along the axis that joins their centres; probes
+                               top and bottom, the grips' displacements along it, and
+                               max_damage): the first failure (history: time, elongation
                                top - bottom in mm and in per cent of the grips' distance; the
-                               failed particles' reference y at the next snapshot), and the
+                               failed particles' reference box at the next snapshot), and the
                                through-crack: the first snapshot where no chain of intact
                                elements sharing faces joins the grips (time, elongation, the
-                               failed elements' reference y: median and interquartile range).
+                               failed elements' axial reference position: median, quartiles).
 """
 
 from __future__ import annotations
@@ -113,8 +114,9 @@ def specimen(out: str) -> None:
     mesh = scene["geometry"]["parts"][0]
     part = MeshPart(mesh["file"], mesh["scale"], mesh["translate"], mesh["cells"], scene["scene"]["dimension"])
     top, bottom = part.set_mask("grip_top"), part.set_mask("grip_bottom")
+    axis = int(np.argmax(np.abs(part.centroid[top].mean(axis=0) - part.centroid[bottom].mean(axis=0))))
     corners = np.concatenate([c for _, _, c in part.blocks])[part.selected]
-    gap = part.points[corners[top], 1].min() - part.points[corners[bottom], 1].max()
+    gap = part.points[corners[top], axis].min() - part.points[corners[bottom], axis].max()
     h = read_history(out)
     elongation = h["top"] - h["bottom"]
 
@@ -136,18 +138,19 @@ def specimen(out: str) -> None:
         failed = s["damage"][order] >= 1.0
         if not failed.any():
             continue
-        Y = (s["position"] - s["displacement"])[order, 1]
+        X = 1e3 * (s["position"] - s["displacement"])[order]
         if not reported:
-            print(f"  failed particles at t = {t:.4g} s: {failed.sum()}, reference y {1e3 * Y[failed].min():.2f} to "
-                  f"{1e3 * Y[failed].max():.2f} mm")
+            box = ", ".join(f"{'xyz'[k]} {X[failed, k].min():.2f} to {X[failed, k].max():.2f}" for k in range(X.shape[1]))
+            print(f"  failed particles at t = {t:.4g} s: {failed.sum()}, reference {box} mm")
             reported = True
         intact = np.flatnonzero(~failed)
         _, label = connected_components(graph[intact][:, intact], directed=False)
         joined = np.intersect1d(label[top[intact]], label[bottom[intact]])
         if not joined.size:
-            q = np.percentile(1e3 * Y[failed], [25, 50, 75])
+            q = np.percentile(X[failed, axis], [25, 50, 75])
             print(f"through-crack at t = {t:.4g} s (first snapshot with the grips apart), {at(t)}; "
-                  f"{failed.sum()} failed particles, reference y median {q[1]:.2f} mm (quartiles {q[0]:.2f}, {q[2]:.2f})")
+                  f"{failed.sum()} failed particles, reference {'xyz'[axis]} median {q[1]:.2f} mm (quartiles "
+                  f"{q[0]:.2f}, {q[2]:.2f})")
             return
     print("no through-crack by the last snapshot")
 
