@@ -977,20 +977,24 @@ def _read(path: str) -> dict:
 
 
 def _anchor_files(raw: dict, directory: str) -> None:
-    """Make the relative `file` of each mesh part of a raw scene relative to `directory`
-    (the scene file's), in place."""
-    tables = [raw.get("geometry")] + [b for b in raw.get("bodies", ()) if isinstance(b, dict)]
-    for table in tables:
-        parts = table.get("parts") if isinstance(table, dict) else None
+    """Make the relative `file` paths of the raw scene's parts (and of their boolean parts)
+    relative to `directory`, the scene file's."""
+    def walk(parts):
         for part in parts if isinstance(parts, list) else ():
-            if isinstance(part, dict) and part.get("shape") == "mesh" and isinstance(part.get("file"), str) \
-                    and not os.path.isabs(part["file"]):
-                part["file"] = os.path.normpath(os.path.join(directory, part["file"]))
+            if isinstance(part, dict):
+                if isinstance(part.get("file"), str) and not os.path.isabs(part["file"]):
+                    part["file"] = os.path.normpath(os.path.join(directory, part["file"]))
+                walk(part.get("parts"))
+
+    geometry = raw.get("geometry")
+    walk(geometry.get("parts") if isinstance(geometry, dict) else None)
+    for body in raw.get("bodies") if isinstance(raw.get("bodies"), list) else ():
+        walk(body.get("parts") if isinstance(body, dict) else None)
 
 
 def load(path: str, overrides: list[str] = ()) -> dict:
-    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene (a
-    mesh part's file relative to the scene file's directory made absolute)."""
+    """Read a scene file, apply `--set` overrides, validate; returns the resolved scene
+    (its parts' files found relative to the scene file)."""
     raw = _read(path)
     for text in overrides:
         apply_override(raw, *parse_override(text))
