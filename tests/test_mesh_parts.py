@@ -389,3 +389,15 @@ def test_the_specimen_mesh_tool_writes_the_committed_file(tmp_path):
     assert part.volume.sum() == pytest.approx(tool.THICKNESS * np.sum(0.5 * (width[1:] + width[:-1]) * np.diff(y)),
                                               rel=1e-12)
     assert [int(part.set_mask(s).sum()) for s in ("grip_bottom", "gauge", "grip_top")] == [1728, 6144, 1728]
+
+
+def test_the_specimen_scene_builds_its_grips_and_gauge_from_the_mesh():
+    scene = config.load(str(ROOT / "runs" / "specimen_mesh.toml"))
+    owned, _ = build_bodies(scene, MPI.COMM_SELF)
+    names = sorted(scene["groups"])
+    counts = {name: int(owned["groups"][:, k].sum()) for k, name in enumerate(names)}
+    assert counts == {"all": 9600, "gauge": 6144, "grip_bottom": 1728, "grip_top": 1728}
+    top = owned["groups"][:, names.index("grip_top")] == 1
+    assert owned["X"][top, 2].min() > 16e-3 and owned["X"][~top, 2].max() < 16e-3
+    # the support: kernel.support times each particle's (element volume)^(1/3)
+    assert owned["support"] == pytest.approx(2.0 * np.cbrt(owned["volume"]), rel=1e-12)
