@@ -250,6 +250,22 @@ def test_gmsh_physical_groups_select_their_elements_and_face_groups_the_elements
     assert np.array_equal(got["not_end"], e[e % 6 != 0])
 
 
+GMSH41 = """$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$PhysicalNames\n2\n3 1 "left"\n3 2 "right"\n$EndPhysicalNames
+$Entities\n0 0 0 2\n1 0 0 0 1 1 1 1 1 0\n2 1 0 0 2 1 1 1 2 0\n$EndEntities
+$Nodes\n1 12 1 12\n3 1 0 12\n""" + "".join(f"{n}\n" for n in range(1, 13)) + """0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1
+1 0 1\n1 1 1\n0 1 1\n2 0 0\n2 1 0\n2 0 1\n2 1 1\n$EndNodes
+$Elements\n2 2 1 2\n3 1 5 1\n1 1 2 3 4 5 6 7 8\n3 2 5 1\n2 2 9 10 3 6 11 12 7\n$EndElements\n"""
+
+
+def test_gmsh_4_physical_volumes_are_sets(tmp_path):
+    """Two unit cubes, each a volume entity of its own physical group, as Gmsh 4.1 writes them."""
+    (tmp_path / "two.msh").write_text(GMSH41)
+    part = MeshPart(str(tmp_path / "two.msh"), dimension=3)
+    assert {"left", "right"} <= set(part.set_names())
+    assert part.set_mask("left").tolist() == [True, False] and part.set_mask("right").tolist() == [False, True]
+    assert part.rows(0, 2)[1] == pytest.approx([1.0, 1.0], rel=1e-14)
+
+
 def test_abaqus_element_and_node_sets_select_their_elements(tmp_path):
     points, cells, _, left = bar_mesh()
     e = np.arange(len(cells))
