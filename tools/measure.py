@@ -124,7 +124,8 @@ def specimen(out: str) -> None:
         e = float(np.interp(t, h["time"], elongation))
         return f"elongation {1e3 * e:.3f} mm ({100 * e / gap:.2f} % of the {1e3 * gap:.1f} mm between the grips)"
 
-    print(f"peak force {h['force'].max():.4g} N at t = {h['time'][np.argmax(h['force'])]:.4g} s, {at(h['time'][np.argmax(h['force'])])}")
+    peak = h["time"][np.argmax(h["force"])]
+    print(f"peak force {h['force'].max():.4g} N at t = {peak:.4g} s, {at(peak)}")
     failed_rows = np.flatnonzero(h["max_damage"] >= 1.0)
     if not failed_rows.size:
         print("no particle fails")
@@ -140,7 +141,8 @@ def specimen(out: str) -> None:
             continue
         X = 1e3 * (s["position"] - s["displacement"])[order]
         if not reported:
-            box = ", ".join(f"{'xyz'[k]} {X[failed, k].min():.2f} to {X[failed, k].max():.2f}" for k in range(X.shape[1]))
+            box = ", ".join(f"{'xyz'[k]} {X[failed, k].min():.2f} to {X[failed, k].max():.2f}"
+                            for k in range(X.shape[1]))
             print(f"  failed particles at t = {t:.4g} s: {failed.sum()}, reference {box} mm")
             reported = True
         intact = np.flatnonzero(~failed)

@@ -44,8 +44,7 @@ def specimen() -> meshio.Mesh:
     points = np.column_stack([(u * width(y)).ravel(), (-v * THICKNESS).ravel(), y.ravel()])
     node = np.arange(points.shape[0]).reshape(nx + 1, ny + 1, nz + 1)
     i, j, k = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"))
-    hexes = np.column_stack([node[i, j, k], node[i + 1, j, k], node[i + 1, j + 1, k], node[i, j + 1, k],
-                             node[i, j, k + 1], node[i + 1, j, k + 1], node[i + 1, j + 1, k + 1], node[i, j + 1, k + 1]])
+    hexes = np.column_stack([node[i + a, j + b, k + c] for c in (0, 1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))])
     centre = points[hexes, 2].mean(axis=1)
     tag = np.where(centre < -GRIP_START, GROUPS["grip_bottom"],
                    np.where(centre > GRIP_START, GROUPS["grip_top"], GROUPS["gauge"]))
