@@ -16,12 +16,14 @@ from parsph import config, geometry
 from parsph.errors import InputError
 from parsph.formulations import galerkin
 from parsph.geometry.gauss_points import BoxGaussPoints
+from parsph.geometry.mesh_parts import MeshPart
 from parsph.geometry.stress_points import stress_points_of
 from parsph.parallel.decomposition import LocalBody, block_cuts, localize, nearby, partition
 from parsph.parallel.runtime import collective, say, warn
 
 PARTS = {"box": geometry.Box, "random_patch": geometry.RandomPatch, "cylinder": geometry.Cylinder,
-         "ring": geometry.Ring, "disk": geometry.Disk, "polar_ring": geometry.PolarRing}
+         "ring": geometry.Ring, "disk": geometry.Disk, "polar_ring": geometry.PolarRing, "mesh": MeshPart}
+MESH_EXTENT = 10.0  # a mesh part wider than this [m] is likely in mm without scale = 1e-3
 
 
 def _generators(parts: list, where: str, dim: int, comm=None) -> list:
@@ -37,10 +39,15 @@ def _generators(parts: list, where: str, dim: int, comm=None) -> list:
                 raise InputError(str(exc)) from None
             continue
         args = {k: v for k, v in part.items() if k != "shape"}
+        if part["shape"] == "mesh":
+            args["dimension"] = dim
         try:
             gens.append(PARTS[part["shape"]](**args))
         except ValueError as exc:
             raise InputError(f"{where}[{i}]: {exc}") from None
+        if part["shape"] == "mesh" and gens[-1].extent > MESH_EXTENT:
+            warn(f"{where}[{i}]: the mesh {part['file']} spans {gens[-1].extent:g} m at scale = {part['scale']:g}; "
+                 "a mesh drawn in mm needs scale = 1e-3")
         if gens[-1].blockwise and gens[-1].count:
             part_dim = gens[-1].rows(0, 1)[0].shape[1]
             if part_dim != dim:
@@ -55,8 +62,9 @@ def _generators(parts: list, where: str, dim: int, comm=None) -> list:
 
 def _block(gens: list, dim: int, comm) -> dict:
     """Rows cuts[r]..cuts[r+1]-1 of the generators (in order) on rank r: candidate index
-    "gid", positions "X", and the second column of the rows, "measure" (the particles'
-    measures, the integration points' weights)."""
+    "gid" (and a copy, "source", that joining parts does not renumber), positions "X", and
+    the second column of the rows, "measure" (the particles' measures, the integration
+    points' weights)."""
     first = np.cumsum([0] + [g.count for g in gens])
     cuts = block_cuts(first[-1], comm.size)
 
@@ -68,8 +76,8 @@ def _block(gens: list, dim: int, comm) -> dict:
                 x, m = g.rows(a - offset, b - offset)
                 X.append(np.asarray(x, np.float64).reshape(-1, dim))
                 measure.append(np.asarray(m, np.float64))
-        return {"gid": np.arange(start, stop, dtype=np.int64), "X": np.concatenate(X),
-                "measure": np.concatenate(measure)}
+        return {"gid": np.arange(start, stop, dtype=np.int64), "source": np.arange(start, stop, dtype=np.int64),
+                "X": np.concatenate(X), "measure": np.concatenate(measure)}
 
     if all(g.blockwise for g in gens):
         return rows(cuts[comm.rank], cuts[comm.rank + 1])
@@ -80,13 +88,13 @@ def _block(gens: list, dim: int, comm) -> dict:
     return comm.scatter(blocks, root=0)
 
 
-def _part_spacing(part: dict) -> float:
+def _part_spacing(part: dict, gen) -> float:
     """A part's nominal particle spacing: its lattice spacing (a polar ring's coarser one),
-    or (volume / count)^(1/D) for a random patch."""
+    or (volume / count)^(1/D) for a random patch and a mesh (generator `gen`)."""
     if "spacing" in part:
         return part["spacing"]
-    if part["shape"] == "polar_ring":
-        return PARTS["polar_ring"](**{k: v for k, v in part.items() if k != "shape"}).spacing
+    if part["shape"] in ("polar_ring", "mesh"):
+        return gen.spacing
     size = np.subtract(part["upper"], part["lower"])
     return float(np.prod(size) / part["count"]) ** (1.0 / len(size))
 
@@ -123,11 +131,12 @@ def _join_parts(owned: dict, first: np.ndarray, spacing: np.ndarray, tol: float,
     return kept, comm.allreduce(close)
 
 
-def _spacing(parts: list, measure: np.ndarray, dim: int) -> np.ndarray:
+def _spacing(parts: list, gens: list, measure: np.ndarray, dim: int) -> np.ndarray:
     """Particle spacing: the lattice spacing of the part a particle came from, or
-    measure^(1/d) for random particle sets (boundary particles of a node lattice keep the
-    lattice spacing although their lumped volume is smaller)."""
-    lattice = [_part_spacing(p) for p in parts if p["shape"] != "random_patch"]
+    measure^(1/d) for random particle sets and meshes (their elements' sizes; boundary
+    particles of a node lattice keep the lattice spacing although their lumped volume is
+    smaller)."""
+    lattice = [_part_spacing(p, g) for p, g in zip(parts, gens) if p["shape"] not in ("random_patch", "mesh")]
     if len(lattice) == len(parts):
         return np.full(len(measure), min(lattice))
     return measure ** (1.0 / dim)
@@ -161,7 +170,7 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
         smallest = min(m for m in comm.allgather(float(owned["measure"].min()) if len(owned["X"]) else None)
                        if m is not None)
         parts = body["parts"]
-        spacing = np.array([_part_spacing(part) for part in parts])
+        spacing = np.array([_part_spacing(part, g) for part, g in zip(parts, gens)])
         owned, close = _join_parts(owned, np.cumsum([0] + [g.count for g in gens]), spacing,
                                    1e-6 * smallest ** (1.0 / dim), comm)
         for q, p in zip(*np.nonzero(close)):
@@ -182,8 +191,36 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
     if neighbours > 0:
         owned["support"] = _neighbour_support(X, neighbours, comm)
     else:
-        owned["support"] = scene["kernel"]["support"] * _spacing(body["parts"], measure, dim)
+        owned["support"] = scene["kernel"]["support"] * _spacing(body["parts"], gens, measure, dim)
     return owned
+
+
+def _mesh_elements(owned: dict, gens: list, meshes: list) -> None:
+    """Replace the candidate index "source" of one body's particles by "mesh", the index in
+    `meshes` (the scene's mesh parts) of the mesh part a particle came from (-1: another
+    shape), and "element", its row in that part."""
+    first = np.cumsum([0] + [g.count for g in gens])
+    source = owned.pop("source")
+    part = np.searchsorted(first, source, side="right") - 1
+    owned["mesh"] = np.full(len(source), -1, np.int64)
+    owned["element"] = source - first[part]
+    for p, g in enumerate(gens):
+        if isinstance(g, MeshPart):
+            owned["mesh"][part == p] = next(k for k, m in enumerate(meshes) if m is g)
+
+
+def _mesh_set(spec: dict, owned: dict, meshes: list) -> np.ndarray:
+    """Mask of the owned particles in the set `spec["mesh_set"]` of mesh part
+    `spec["mesh_part"]` (inverted with `invert`)."""
+    invert = spec.get("invert", False)
+    if not isinstance(invert, bool):
+        raise ValueError(f"invert must be true or false, got {invert!r}")
+    k = spec["mesh_part"]
+    members = meshes[k].set_mask(spec["mesh_set"])  # on every rank: an unknown set fails on all
+    mine = owned["mesh"] == k
+    mask = np.zeros(len(mine), bool)
+    mask[mine] = members[owned["element"][mine]]
+    return ~mask if invert else mask
 
 
 def build_integration_points(scene: dict, comm) -> dict:
@@ -231,8 +268,10 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
             raise InputError(f"kernel.neighbours = {neighbours} needs at least {neighbours + 2} "
                              f"particles, the scene has {total}")
     blocks, offsets = [], [0]
+    meshes = [g for body_gens in gens for g in body_gens if isinstance(g, MeshPart)]
     for body, where, body_gens in zip(specs, wheres, gens):
         owned = _body_particles(scene, body, where, body_gens, comm)
+        _mesh_elements(owned, body_gens, meshes)
         owned["gid"] = owned["gid"] + offsets[-1]
         blocks.append(owned)
         offsets.append(offsets[-1] + comm.allreduce(len(owned["gid"])))
@@ -243,11 +282,14 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
     groups = np.zeros((len(X), len(names)), np.uint8)
     with collective(comm):
         for k, name in enumerate(names):
+            spec = scene["groups"][name]
             try:
-                groups[:, k] = geometry.select(scene["groups"][name], X, measure, owned["gid"], comm)
+                groups[:, k] = _mesh_set(spec, owned, meshes) if "mesh_set" in spec else \
+                    geometry.select(spec, X, measure, owned["gid"], comm)
             except ValueError as exc:
                 raise InputError(f"groups.{name}: {exc}") from None
     owned["groups"] = groups
+    del owned["mesh"], owned["element"]
     used = {item["group"] for key in ("bc", "tractions", "walls", "tools", "initial", "probes") for item in scene[key]}
     counts = comm.allreduce(groups.sum(axis=0, dtype=np.int64))
     with collective(comm):

@@ -167,6 +167,15 @@ PART_KEYS: dict[str, dict[str, Key]] = {
         "radial": Key("int", REQUIRED, positive, "rows of particles, from the inner to the outer surface"),
         "angular": Key("int", REQUIRED, positive, "particles per row"),
     },
+    "mesh": {  # a finite-element mesh: a particle per element (geometry.mesh_parts)
+        "file": Key("str", REQUIRED, doc="the mesh file (Gmsh .msh, Abaqus .inp, VTK .vtu, ... as meshio reads "
+                                         "them), relative to the scene file's directory: a particle at each "
+                                         "element's centroid with its volume"),
+        "scale": Key("float", 1.0, positive, "factor on the mesh's coordinates (1e-3 for a mesh in mm)"),
+        "translate": Key("vector", None, doc="added to the scaled coordinates [m]"),
+        "cells": Key("strlist", None, doc="only the elements of these mesh sets (default: all the elements of "
+                                          "the scene's dimension)"),
+    },
 }
 # Solid parts (geometry.solids), filled with a cell-centred lattice (geometry.fill): a part's
 # transforms, and its spacing (not in a boolean's parts, which the boolean's spacing fills).
@@ -216,8 +225,8 @@ SOLIDS = tuple(SOLID_KEYS)
 for _shape, _keys in SOLID_KEYS.items():
     PART_KEYS[_shape] = {**_keys, **FILL_KEYS, **TRANSFORM_KEYS}
 PART_DIMENSIONS = {"box": (1, 2, 3), "random_patch": (2,), "cylinder": (3,), "ring": (2,), "disk": (2,),
-                   "polar_ring": (2,), "polygon": (2,), "circle": (2,), "sphere": (3,), "cone": (3,),
-                   "extrusion": (3,), "surface": (3,), "union": (2, 3), "difference": (2, 3),
+                   "polar_ring": (2,), "mesh": (2, 3), "polygon": (2,), "circle": (2,), "sphere": (3,),
+                   "cone": (3,), "extrusion": (3,), "surface": (3,), "union": (2, 3), "difference": (2, 3),
                    "intersection": (2, 3)}
 
 BC_KEYS = {
@@ -300,7 +309,7 @@ CONTACT_KEYS = {
     "self_contact": Key("bool", False, None, "bodies names one body twice: its particles that are not kernel "
                                              "neighbours touch (crack faces, folds)"),
 }
-GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme")
+GROUP_SELECTORS = ("all", "box", "sphere", "halfspace", "nearest", "extreme", "mesh_set")
 GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.select), for the reference
     "all": Key("bool", None, doc="true: every particle"),
     "box": Key("table", None, doc="{ lower = [...], upper = [...] }: the particles in the closed box [m]"),
@@ -312,6 +321,11 @@ GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.s
     "extreme": Key("table", None, doc="{ axis = k, side = \"min\" or \"max\", tolerance = t }: the particles "
                                       "within t of the smallest or largest coordinate k (t: default half the "
                                       "median particle size) [m]"),
+    "mesh_set": Key("str", None, doc="the particles of a set of a mesh part's file: its elements (a Gmsh "
+                                     "physical group, an Abaqus element set, KEY=VALUE of integer cell data), "
+                                     "or the elements touching its nodes (an Abaqus node set, a set of faces)"),
+    "mesh_part": Key("int", 0, non_negative, "with mesh_set: which of the scene's mesh parts (0: the first, "
+                                             "counted over the bodies in order)"),
     "invert": Key("bool", False, doc="take the particles the selector does not"),
 }
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
@@ -465,7 +479,8 @@ def _validate_material(path: str, mat: dict) -> None:
                          f"are not finite positive numbers in double precision ({given})")
 
 
-def _validate_groups(raw: Any, dim: int) -> dict:
+def _validate_groups(raw: Any, dim: int, meshes: int) -> dict:
+    """The [groups.NAME] tables (`meshes`: the number of mesh parts mesh_set may name)."""
     if raw is None:
         raw = {}
     if not isinstance(raw, dict):
@@ -475,12 +490,22 @@ def _validate_groups(raw: Any, dim: int) -> dict:
         path = f"groups.{name}"
         if not isinstance(spec, dict):
             raise InputError(f"{path} must be a table")
-        selectors = [k for k in spec if k != "invert"]
+        selectors = [k for k in spec if k not in ("invert", "mesh_part")]
         for k in selectors:
             if k not in GROUP_SELECTORS:
-                raise InputError(f"unknown key '{path}.{k}'{_suggest(k, GROUP_SELECTORS + ('invert',))}")
+                raise InputError(f"unknown key '{path}.{k}'{_suggest(k, GROUP_SELECTORS + ('invert', 'mesh_part'))}")
         if len(selectors) != 1:
             raise InputError(f"{path} needs exactly one of {', '.join(GROUP_SELECTORS)}")
+        if "mesh_set" in spec or "mesh_part" in spec:
+            if "mesh_set" not in spec:
+                raise InputError(f"{path}.mesh_part goes with mesh_set")
+            spec = dict(spec, **{k: _coerce(f"{path}.{k}", GROUP_KEYS[k], spec.get(k, GROUP_KEYS[k].default), dim)
+                                 for k in ("mesh_set", "mesh_part")})
+            if not meshes:
+                raise InputError(f"{path}.mesh_set needs a part of shape 'mesh'")
+            if spec["mesh_part"] >= meshes:
+                raise InputError(f"{path}.mesh_part = {spec['mesh_part']}: the scene has {meshes} part(s) of "
+                                 "shape 'mesh' (counted from 0)")
         groups[name] = spec
     return groups
 
@@ -846,7 +871,8 @@ def validate(raw: dict) -> dict:
         scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
         _validate_material("material", scene["material"])
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
-    scene["groups"] = _validate_groups(raw.get("groups"), dim)
+    scene["groups"] = _validate_groups(raw.get("groups"), dim,
+                                       sum(p["shape"] == "mesh" for b in bodies(scene) for p in b["parts"]))
     _validate_lists(scene, raw, dim)
     for body in bodies(scene):
         model = failure_of(body["material"])

@@ -73,14 +73,14 @@ def test_new_keys_shapes_selectors_and_arrays_appear_unchanged_generator(monkeyp
     monkeypatch.setattr(config, "TOP_LEVEL", config.TOP_LEVEL + ("surfaces",))
     monkeypatch.setitem(config.PART_KEYS, "sphere", {"radius": Key("float", REQUIRED, positive, "radius [m]")})
     monkeypatch.setitem(config.PART_DIMENSIONS, "sphere", (3,))
-    monkeypatch.setattr(config, "GROUP_SELECTORS", config.GROUP_SELECTORS + ("mesh_set",))
+    monkeypatch.setattr(config, "GROUP_SELECTORS", config.GROUP_SELECTORS + ("near_surface",))
     monkeypatch.setitem(config.SECTIONS["time"], "new_limit", Key("float", 1.0, positive, "a new limit [s]"))
     names = {s.name: s for s in keyref.sections()}
     assert names["surfaces"].title == "[[surfaces]]" and names["surfaces"].keys is surface
     assert "in 3D" in names["geometry.parts.sphere"].intro
     assert "new_limit: number [s] = 1.0; > 0" in keyref.text("time")
-    assert "mesh_set" in names["groups"].keys  # shown without a doc: the doc test then names it
-    assert not keyref.row("mesh_set", names["groups"].keys["mesh_set"]).meaning
+    assert "near_surface" in names["groups"].keys  # shown without a doc: the doc test then names it
+    assert not keyref.row("near_surface", names["groups"].keys["near_surface"]).meaning
 
 
 def test_a_law_section_marks_its_constants_required():

@@ -20,6 +20,16 @@
                                particles FIT_BAND spacings from the edge, over the net-section
                                stress, against Roark's K_tn; the far field's sigma_yy against the
                                traction and the kinetic energy left (static state).
+  tools/measure.py specimen OUT a specimen from a mesh pulled by its grips to failure
+                               (runs/specimen_mesh.toml: the mesh sets grip_top, grip_bottom,
+                               pulled apart along the axis that joins their centres; probes
+                               top and bottom, the grips' displacements along it, and
+                               max_damage): the first failure (history: time, elongation
+                               top - bottom in mm and in per cent of the grips' distance; the
+                               failed particles' reference box at the next snapshot), and the
+                               through-crack: the first snapshot where no chain of intact
+                               elements sharing faces joins the grips (time, elongation, the
+                               failed elements' axial reference position: median, quartiles).
 """
 
 from __future__ import annotations
@@ -35,7 +45,9 @@ from scipy.spatial import cKDTree
 
 from parsph.bc import Tractions
 from parsph.geometry import select
+from parsph.geometry.mesh_parts import MeshPart
 from parsph.io import read_history, read_snapshots
+from parsph.io.output_dir import held_scene
 
 
 def snapshots(out: str):
@@ -216,7 +228,72 @@ def kirsch(out: str) -> None:
           f" (Roark's {ktn / (1 - f['ratio']):.4f})")
 
 
-COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "kirsch": kirsch}
+def face_graph(part: MeshPart) -> sparse.csr_matrix:
+    """Adjacency of the part's particles (elements, in its order) that share a face (at
+    least as many nodes as the dimension)."""
+    rows, cols = [], []
+    for b, start, _ in part.blocks:
+        data = np.asarray(part.mesh.cells[b].data)
+        rows.append(np.repeat(np.arange(start, start + len(data)), data.shape[1]))
+        cols.append(data.ravel())
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    incidence = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(part.total, len(part.mesh.points)))
+    shared = (incidence @ incidence.T).tocsr()[part.selected][:, part.selected]
+    shared.data = (shared.data >= part.dim).astype(np.float64)
+    shared.setdiag(0.0)
+    shared.eliminate_zeros()
+    return shared
+
+
+def specimen(out: str) -> None:
+    scene = held_scene(out)
+    mesh = scene["geometry"]["parts"][0]
+    part = MeshPart(mesh["file"], mesh["scale"], mesh["translate"], mesh["cells"], scene["scene"]["dimension"])
+    top, bottom = part.set_mask("grip_top"), part.set_mask("grip_bottom")
+    axis = int(np.argmax(np.abs(part.centroid[top].mean(axis=0) - part.centroid[bottom].mean(axis=0))))
+    corners = np.concatenate([c for _, _, c in part.blocks])[part.selected]
+    gap = part.points[corners[top], axis].min() - part.points[corners[bottom], axis].max()
+    h = read_history(out)
+    elongation = h["top"] - h["bottom"]
+
+    def at(t):
+        e = float(np.interp(t, h["time"], elongation))
+        return f"elongation {1e3 * e:.3f} mm ({100 * e / gap:.2f} % of the {1e3 * gap:.1f} mm between the grips)"
+
+    peak = h["time"][np.argmax(h["force"])]
+    print(f"peak force {h['force'].max():.4g} N at t = {peak:.4g} s, {at(peak)}")
+    failed_rows = np.flatnonzero(h["max_damage"] >= 1.0)
+    if not failed_rows.size:
+        print("no particle fails")
+        return
+    t_first = h["time"][failed_rows[0]]
+    print(f"first failure at t = {t_first:.4g} s, {at(t_first)}")
+    graph = face_graph(part)
+    reported = False
+    for t, s in snapshots(out):
+        order = np.argsort(s["gid"])
+        failed = s["damage"][order] >= 1.0
+        if not failed.any():
+            continue
+        X = 1e3 * (s["position"] - s["displacement"])[order]
+        if not reported:
+            box = ", ".join(f"{'xyz'[k]} {X[failed, k].min():.2f} to {X[failed, k].max():.2f}"
+                            for k in range(X.shape[1]))
+            print(f"  failed particles at t = {t:.4g} s: {failed.sum()}, reference {box} mm")
+            reported = True
+        intact = np.flatnonzero(~failed)
+        _, label = connected_components(graph[intact][:, intact], directed=False)
+        joined = np.intersect1d(label[top[intact]], label[bottom[intact]])
+        if not joined.size:
+            q = np.percentile(X[failed, axis], [25, 50, 75])
+            print(f"through-crack at t = {t:.4g} s (first snapshot with the grips apart), {at(t)}; "
+                  f"{failed.sum()} failed particles, reference {'xyz'[axis]} median {q[1]:.2f} mm (quartiles "
+                  f"{q[0]:.2f}, {q[2]:.2f})")
+            return
+    print("no through-crack by the last snapshot")
+
+
+COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "kirsch": kirsch, "specimen": specimen}
 
 if __name__ == "__main__":
     if len(sys.argv) != 3 or sys.argv[1] not in COMMANDS:
