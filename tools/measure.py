@@ -13,6 +13,11 @@
                                its spread (standard deviation over |mean|) around the ring.
   tools/measure.py drained OUT the funnel (runs/funnel.toml): at each snapshot, the share of
                                the fluid's mass below y = 0, through the opening.
+  tools/measure.py punch_stl OUT_STL OUT_TOOL
+                               the punch as a surface file (runs/punch_stl.toml) against the
+                               tool (runs/punch.toml): the two forces at the history rows of
+                               both, the largest relative difference over the rows where the
+                               tool's force exceeds a tenth of its last value, and at the end.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import scipy.sparse as sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from parsph.io import read_snapshots
+from parsph.io import read_history, read_snapshots
 
 
 def snapshots(out: str):
@@ -80,9 +85,31 @@ def drained(out: str) -> None:
         print(f"t = {t:.4g} s: {below.mean():.3f} of the fluid below the opening")
 
 
-COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained}
+def stroke_difference(surface_out: str, tool_out: str) -> tuple:
+    """(times, surface force, tool force, largest relative difference where the tool's force
+    exceeds a tenth of its last value, relative difference at the last row) of the punch's
+    force, surface0_force_y against tool0_force_y, at the rows of the surface's history (the
+    tool's force interpolated linearly to their times, which differ by the stable steps)."""
+    a, b = read_history(surface_out), read_history(tool_out)
+    times = a["time"][a["time"] <= b["time"][-1]]
+    fa, fb = a["surface0_force_y"][: len(times)], np.interp(times, b["time"], b["tool0_force_y"])
+    loaded = np.abs(fb) > 0.1 * abs(fb[-1])
+    relative = np.divide(np.abs(fa - fb), np.abs(fb), out=np.zeros_like(fb), where=fb != 0.0)
+    return times, fa, fb, float(relative[loaded].max()), float(relative[-1])
+
+
+def punch_stl(surface_out: str, tool_out: str) -> None:
+    times, fa, fb, worst, end = stroke_difference(surface_out, tool_out)
+    print("   t [ms]  surface [N/m]     tool [N/m]   difference")
+    for t, x, y in zip(times, fa, fb):
+        print(f"{1e3 * t:9.3f}  {x:13.6g}  {y:13.6g}  {abs(x - y) / abs(y) if y else 0.0:11.2e}")
+    print(f"{len(times)} rows; largest relative difference where the tool's force exceeds a tenth of its last "
+          f"value: {worst:.2e}; at t = {1e3 * times[-1]:.3f} ms: {end:.2e}")
+
+
+COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "punch_stl": punch_stl}
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3 or sys.argv[1] not in COMMANDS:
+    if len(sys.argv) < 3 or sys.argv[1] not in COMMANDS:
         sys.exit(__doc__)
-    COMMANDS[sys.argv[1]](sys.argv[2])
+    COMMANDS[sys.argv[1]](*sys.argv[2:])
