@@ -27,7 +27,7 @@ def outline(segments: int) -> np.ndarray:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--segments", type=int, default=16, help="segments per quarter circle")
+    parser.add_argument("--segments", type=int, default=256, help="segments per quarter circle")
     parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "..", "runs", "parts",
                                                       "punch_tool.csv"))
     args = parser.parse_args()
