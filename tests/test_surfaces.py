@@ -76,3 +76,108 @@ def test_a_flat_stl_presses_a_block_as_the_same_wall_plane(plane):
     rows = wall.group_index("all")
     assert np.allclose(stl.quantity("position", rows), wall.quantity("position", rows), rtol=0, atol=1e-12)
     assert stl.quantity("position", rows)[:, 2].min() >= 0.02 + stl.t - 1e-12  # none left inside
+
+def test_frictionless_sliding_keeps_the_tangential_momentum_and_friction_takes_it(plane):
+    """The block thrown at (2, 0, -1) m/s onto a plane at rest: frictionless, the plane's
+    forces are normal and the momentum along it is kept to round-off; with friction 0.3 the
+    plane's tangential force opposes the sliding and is at most 0.3 times its normal force
+    at every step (Coulomb), and the block slows down."""
+    throw = '[[initial]]\ntype = "velocity"\nvalue = [2.0, 0.0, -1.0]\n'
+    free = simulation(BLOCK + throw + surface(plane, "translate = [0.0, 0.0, 0.03]"))
+    h = run_until(free, 0.1)
+    assert np.abs(h["surface0_force_z"]).max() > 100.0  # it struck
+    assert np.abs(h["momentum_x"] - h["momentum_x"][0]).max() < 1e-12 * h["momentum_x"][0]
+    rough = simulation(BLOCK + throw + surface(plane, "translate = [0.0, 0.0, 0.03]\nfriction = 0.3"))
+    h = run_until(rough, 0.1)
+    fx, fz = h["surface0_force_x"], h["surface0_force_z"]
+    assert fx.min() < -10.0 and fx.max() <= 0.0
+    assert np.all(np.abs(fx) <= 0.3 * np.abs(fz) * (1 + 1e-12))
+    assert h["momentum_x"][-1] < 0.95 * h["momentum_x"][0]
+
+
+def step_with_impulses(sim, end: float, power) -> tuple:
+    """Step `sim` to `end`; returns (history of diagonstics each step, the sum over the steps
+    of power(sim, row) times the time the step's impulse stands for, (dt_(n-1) + dt_n) / 2)."""
+    rows, work, last = [sim.diagnostics()], 0.0, 0.0
+    while sim.t < end * (1 - 1e-12):
+        dt = sim.step()
+        rows.append(sim.diagnostics())
+        work += power(sim, rows[-1]) * 0.5 * (last + dt)
+        last = dt
+    return {k: np.array([r[k] for r in rows]) for k in rows[0]}, work
+
+
+def pressed(plane: str, cfl: float) -> tuple:
+    """The plane, touching the block's lowest particles at t = 0, rising at a velocity ramped
+    as an expression of t (0 to 1 m/s over 20 ms) to 60 ms at `cfl`: (history, the sum over
+    the steps of its force times its velocity)."""
+    sim = simulation(BLOCK + surface(plane, 'translate = [0.0, 0.0, 0.05]\n'
+                                     'velocity_expression = ["0", "0", "minimum(t / 0.02, 1.0)"]'), [f"time.cfl={cfl}"])
+    return step_with_impulses(sim, 0.06, lambda s, row: row["surface0_force_z"] * min(s.t / 0.02, 1.0))
+
+
+def test_a_moving_surface_does_its_force_times_velocity_as_work_in_the_balance(plane):
+    """The balance's external work (the rising plane's alone) tends to the sum of its force
+    times its velocity over the steps at first order in the step (what the plastic contact
+    loses in a step, as the tool's: measured 6.9 % of it at cfl 0.6, 3.6 % at 0.3), and the
+    total energy is conserved to the integration's error (second order: 0.36 %, 0.09 %)."""
+    gaps, drifts = [], []
+    for cfl in (0.6, 0.3):
+        h, work = pressed(plane, cfl)
+        assert work > 10.0
+        gaps.append((work - h["external_work"][-1]) / work)
+        drifts.append(np.abs(h["total_energy"] - h["total_energy"][0]).max() / work)
+    assert 0.0 < gaps[0] < 0.1 and 0.4 < gaps[1] / gaps[0] < 0.65
+    assert drifts[0] < 0.01 and drifts[1] < 0.35 * drifts[0]
+
+
+ROTOR = """
+[scene]
+name = "surface_rotor"
+dimension = 2
+[[geometry.parts]]
+shape = "box"
+lower = [0.0, 0.0]
+upper = [1.0, 0.6]
+spacing = 0.1
+[kernel]
+type = "wendland_c2"
+support = 2.2
+[material]
+model = "saint_venant_kirchhoff"
+density = 1000.0
+youngs_modulus = 1.0e6
+poisson_ratio = 0.3
+[formulation]
+hourglass = 20.0
+[time]
+end = 1.0
+[groups.bottom]
+extreme = { axis = 1, side = "min" }
+[[bc]]
+type = "fixed"
+group = "bottom"
+"""
+
+
+def test_a_turning_surface_does_its_torque_times_angular_velocity_as_work(tmp_path):
+    """A bar (a closed outline, 1.2 m x 4 cm) hinged at its end, lying on the block held at
+    its base, turns down at an angular velocity ramped as an expression of t (0 to -2 rad/s
+    over 20 ms): its torque about the hinge presses (negative), the balance's external work
+    is the sum over the steps of torque times angular velocity, to the contact's loss
+    (measured 0.96 % at cfl 0.6), the total energy is conserved, and the bar's outline at
+    the end is turned by the integral of the angular velocity."""
+    bar = tmp_path / "bar.csv"
+    np.savetxt(bar, [[0.0, 0.55], [1.2, 0.55], [1.2, 0.59], [0.0, 0.59]], delimiter=",")
+    sim = simulation(ROTOR + surface(bar, 'center = [0.0, 0.57]\n'
+                                     'angular_velocity_expression = ["-2 * minimum(t / 0.02, 1.0)"]'))
+    h, work = step_with_impulses(sim, 0.06, lambda s, row: -2.0 * min(s.t / 0.02, 1.0) * row["surface0_torque_z"])
+    torque = h["surface0_torque_z"]
+    assert torque.min() < -1e4 and torque.max() <= 0.0
+    assert work > 1e3
+    assert h["external_work"][-1] == pytest.approx(work, rel=0.02)
+    assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 0.01 * work
+    a = -2.0 * (sim.t - 0.01)  # the ramp's integral
+    corner = np.array([0.0, 0.57]) + np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) @ [1.2, -0.02]
+    drawn = sim.walls.items[0].triangles(sim.t).reshape(-1, 2)
+    assert np.linalg.norm(drawn - corner, axis=1).min() < 1e-12

@@ -85,12 +85,12 @@ def drained(out: str) -> None:
         print(f"t = {t:.4g} s: {below.mean():.3f} of the fluid below the opening")
 
 
-def stroke_difference(surface_out: str, tool_out: str) -> tuple:
+def stroke_difference(a: dict, b: dict) -> tuple:
     """(times, surface force, tool force, largest relative difference where the tool's force
     exceeds a tenth of its last value, relative difference at the last row) of the punch's
-    force, surface0_force_y against tool0_force_y, at the rows of the surface's history (the
-    tool's force interpolated linearly to their times, which differ by the stable steps)."""
-    a, b = read_history(surface_out), read_history(tool_out)
+    force, surface0_force_y of the history `a` against tool0_force_y of `b`, at the rows of
+    `a` (the tool's force interpolated linearly to their times, which differ by the stable
+    steps)."""
     times = a["time"][a["time"] <= b["time"][-1]]
     fa, fb = a["surface0_force_y"][: len(times)], np.interp(times, b["time"], b["tool0_force_y"])
     loaded = np.abs(fb) > 0.1 * abs(fb[-1])
@@ -99,7 +99,7 @@ def stroke_difference(surface_out: str, tool_out: str) -> tuple:
 
 
 def punch_stl(surface_out: str, tool_out: str) -> None:
-    times, fa, fb, worst, end = stroke_difference(surface_out, tool_out)
+    times, fa, fb, worst, end = stroke_difference(read_history(surface_out), read_history(tool_out))
     print("   t [ms]  surface [N/m]     tool [N/m]   difference")
     for t, x, y in zip(times, fa, fb):
         print(f"{1e3 * t:9.3f}  {x:13.6g}  {y:13.6g}  {abs(x - y) / abs(y) if y else 0.0:11.2e}")
