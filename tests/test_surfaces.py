@@ -251,3 +251,29 @@ def test_a_bad_surface_is_refused_naming_the_file(case, ranks, tmp_path, plane):
     assert proc.returncode == 2, proc.stderr
     assert re.search(message, proc.stderr), proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_a_2d_outline_reads_the_same_from_csv_and_dxf_turned_counter_clockwise(tmp_path):
+    """The punch's outline (tools/punch_tool_outline.py) as a CSV, as the same CSV listed
+    clockwise and as a DXF polyline (trimesh): the same closed outline, counter-clockwise
+    (the outside on the segments' right: igl's pseudo-normal sign), so that a point inside
+    the punch is inside."""
+    import igl
+    from trimesh.path.entities import Line
+
+    import punch_tool_outline
+    from parsph.surfaces import read
+
+    V = punch_tool_outline.outline(8)
+    np.savetxt(tmp_path / "ccw.csv", V, delimiter=",")
+    np.savetxt(tmp_path / "cw.csv", V[::-1], delimiter=",")
+    trimesh.path.Path2D(entities=[Line(np.r_[np.arange(len(V)), 0])], vertices=V).export(str(tmp_path / "tool.dxf"))
+    outlines = [read(str(tmp_path / name), "file", 2) for name in ("ccw.csv", "cw.csv", "tool.dxf")]
+    for W, F in outlines:
+        assert len(F) == len(V) and np.array_equal(np.sort(F[:, 1] - F[:, 0]) % len(V), np.ones(len(V)))
+        segments = W[F]
+        assert np.abs(np.sort(segments.reshape(len(F), -1), axis=0)
+                      - np.sort(V[np.c_[np.arange(len(V)), (np.arange(len(V)) + 1) % len(V)]].reshape(len(V), -1),
+                                axis=0)).max() < 1e-12
+        S = igl.signed_distance(np.array([[0.0, 0.01], [0.0, -0.001]]), W, F, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)[0]
+        assert S[0] == pytest.approx(-0.01) and S[1] == pytest.approx(0.001)
