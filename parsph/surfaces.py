@@ -13,17 +13,17 @@ expressions of the time t.
 
 Contact is that of parsph.walls (a particle found inside is put back on the surface, along
 the direction to its closest point, and loses its approach, relative to the surface's
-velocity at that point), with Coulomb friction: the tangential relative velocity loses
-at most `friction` times the normal velocity change (a free rigid body meets it as it meets
-a wall, frictionless: parsph.rigid). The signed distance is libigl's,
-signed by the pseudo-normal of the closest feature (inside < 0), from the triangles of
-this rank's share: those whose bounding boxes meet the particles' bounding box (in the
-surface's frame) grown by the margin, chosen again when a particle leaves the box grown
-by half of it. A particle is seen inside only within half the margin (a twentieth of the
-surface's bounding-box diagonal) of the surface: no particle may move into it farther in
-one step. Its closest point is chosen among the held triangles at its distance, the
-nearest with ties to the lowest triangle number of the file: a function of its position
-and the whole surface alone, on any number of ranks.
+velocity at that point), with Coulomb friction: the tangential relative velocity loses at
+most `friction` times the normal velocity change (a free rigid body meets it as it meets a
+wall, frictionless: parsph.rigid). The signed distance is libigl's, signed by the
+pseudo-normal of the closest feature (inside < 0), from the triangles of this rank's
+share: those whose bounding boxes meet the particles' bounding box (in the surface's
+frame) grown by the margin, chosen again when a particle leaves the box grown by half of
+it. A particle is seen inside only within half the margin (a twentieth of the surface's
+bounding-box diagonal) of the surface: no particle may move into it farther in one step.
+Its closest point is chosen among the held triangles at its distance, the nearest with
+ties to the lowest triangle number of the file: a function of its position and the whole
+surface alone, on any number of ranks.
 """
 
 from __future__ import annotations
