@@ -168,6 +168,8 @@ class Simulation:
                                   f"two bodies coincide; the run is unstable: {self.stable.advice()}") from None
             internal += self.contact.force
             seconds["contact"] += clock() - t0
+        if self.walls.turning:
+            self.walls.limit_steps(self.X[:n] + self.u[:n], self.v[:n], self.t, self.step_limit)
         self.internal_force = internal  # the forces between particles (ledger: their impulses)
         force = internal
         if self.body_acc is not None or self.tractions:

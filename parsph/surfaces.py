@@ -20,10 +20,11 @@ pseudo-normal of the closest feature (inside < 0), from the triangles of this ra
 share: those whose bounding boxes meet the particles' bounding box (in the surface's
 frame) grown by the margin, chosen again when a particle leaves the box grown by half of
 it. A particle is seen inside only within half the margin (a twentieth of the surface's
-bounding-box diagonal) of the surface: no particle may move into it farther in one step.
-Its closest point is chosen among the held triangles at its distance, the nearest with
-ties to the lowest triangle number of the file: a function of its position and the whole
-surface alone, on any number of ranks.
+bounding-box diagonal) of the surface: the stable step lets no particle of its group move
+by more than a quarter of the margin relative to it (Walls.limit_steps). Its closest point
+is chosen among the held triangles at its distance, the nearest with ties to the lowest
+triangle number of the file: a function of its position and the whole surface alone, on
+any number of ranks.
 """
 
 from __future__ import annotations

@@ -167,6 +167,16 @@ class Walls:
             return (r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0])[:, None]
         return np.cross(r, f)
 
+    def limit_steps(self, x: np.ndarray, v: np.ndarray, t: float, step_limit: np.ndarray) -> None:
+        """Bound the steps of the owned particles (at x, with velocities v) that can touch a
+        surface: none may move by more than a quarter of its margin relative to it (it sees
+        a particle within half the margin)."""
+        for k in self.turning:
+            item, rows = self.items[k], self.items[k].index
+            speed = np.linalg.norm(v[rows] - item.velocity_at(x[rows], t), axis=1)
+            moving = rows[speed > 0.0]
+            step_limit[moving] = np.minimum(step_limit[moving], 0.25 * item.margin / speed[speed > 0.0])
+
     def force_sums(self) -> list:
         """Each obstacle's force on this rank's particles, exact (obstacle-major, then
         component)."""

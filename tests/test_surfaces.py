@@ -277,3 +277,18 @@ def test_a_2d_outline_reads_the_same_from_csv_and_dxf_turned_counter_clockwise(t
                                 axis=0)).max() < 1e-12
         S = igl.signed_distance(np.array([[0.0, 0.01], [0.0, -0.001]]), W, F, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)[0]
         assert S[0] == pytest.approx(-0.01) and S[1] == pytest.approx(0.001)
+
+
+def test_no_particle_moves_more_than_a_quarter_of_the_margin_in_a_step(plane):
+    """The block skimming at 300 m/s over the plane (whose margin is 0.28 m: a twentieth of
+    its diagonal) would move 0.36 m in a stable step; a step lets it move a quarter of the
+    margin, no more, and the block alone keeps its own step."""
+    fast = BLOCK + '[[initial]]\ntype = "velocity"\nvalue = [300.0, 0.0, 0.0]\n'
+    sim = simulation(fast + surface(plane, "translate = [0.0, 0.0, -0.03]"))
+    margin = sim.walls.items[0].margin
+    assert margin == pytest.approx(0.05 * np.hypot(4.0, 4.0))
+    free = simulation(fast)
+    for s in (sim, free):
+        s.step()
+    assert sim.stable.dt * 300.0 <= 0.25 * margin * (1 + 1e-12)
+    assert free.stable.dt * 300.0 > margin
