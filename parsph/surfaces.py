@@ -113,6 +113,15 @@ def _rotation(angles, dim: int) -> np.ndarray:
     return Rotation.from_euler("xyz", angles, degrees=True).as_matrix()
 
 
+def _product(a: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """a @ M (a's rows times the matrix M), each row summed in the same order whatever the
+    number of rows (a matrix product's blocking may not)."""
+    out = a[:, :1] * M[0]
+    for j in range(1, len(M)):
+        out = out + a[:, j:j + 1] * M[j]
+    return out
+
+
 class _Rate:
     """A vector given as numbers or as expressions of t, and its integral from 0."""
 
@@ -197,21 +206,29 @@ class Surface:
         if not len(x):
             return gap, normal
         c, R = self.pose(t)
-        y = (x - c) @ R + self.center0  # in the surface's frame
+        y = _product(x - c, R) + self.center0  # in the surface's frame
         if self.held is None or np.any(y < self.held[0]) or np.any(y > self.held[1]):
             self._hold(y)
         if not len(self.faces):
             return gap, normal
-        S = igl.signed_distance(y, self.local_V, self.local_F, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)[0]
+        near = np.flatnonzero(np.isfinite(self.tree.query(y, distance_upper_bound=0.5 * self.margin + self.reach)[0]))
+        S = np.full(len(y), np.inf)  # the others are farther than half the margin from every held triangle
+        if len(near):
+            S[near] = igl.signed_distance(y[near], self.local_V, self.local_F, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)[0]
         inside = np.flatnonzero((S < 0.0) & (S > -0.5 * self.margin))
-        for i in inside:  # few: the particles in contact
-            cand = np.array(sorted(self.tree.query_ball_point(y[i], -S[i] * (1 + 1e-9) + self.reach)), np.int64)
-            points = self._closest(self.corners[cand], np.broadcast_to(y[i], (len(cand), self.dim)))
-            dist = np.linalg.norm(points - y[i], axis=1)
-            best = np.lexsort([cand, dist])[0]
-            if dist[best] > 0.0:
-                gap[i] = -dist[best]
-                normal[i] = R @ ((points[best] - y[i]) / dist[best])
+        if not len(inside):
+            return gap, normal
+        near = self.tree.query_ball_point(y[inside], -S[inside] * (1 + 1e-9) + self.reach)
+        owner = np.repeat(np.arange(len(inside)), [len(c) for c in near])
+        cand = np.concatenate([np.sort(c) for c in near]).astype(np.int64)
+        points = self._closest(self.corners[cand], y[inside][owner])
+        dist = np.linalg.norm(points - y[inside][owner], axis=1)
+        order = np.lexsort([self.faces[cand], dist, owner])  # per particle: the nearest, then the lowest number
+        first = order[np.r_[0, np.flatnonzero(np.diff(owner[order])) + 1]]
+        touch = dist[first] > 0.0
+        rows, first = inside[owner[first[touch]]], first[touch]
+        gap[rows] = -dist[first]
+        normal[rows] = _product((points[first] - y[rows]) / dist[first, None], R.T)
         return gap, normal
 
     def _closest(self, simplices: np.ndarray, points: np.ndarray) -> np.ndarray:

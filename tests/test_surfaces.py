@@ -206,6 +206,7 @@ SPHERE_SCENE = BLOCK.replace("spacing = 0.1", "spacing = 0.05") + """
 file = "sphere.stl"
 translate = [0.17, 0.21, 0.425]
 velocity = [0.0, 0.0, -1.0]
+angular_velocity = [0.0, 2.0, 5.0]
 friction = 0.2
 """
 
@@ -213,15 +214,15 @@ friction = 0.2
 @pytest.mark.mpi
 def test_a_3d_surface_gives_the_same_answer_on_1_and_3_ranks(tmp_path):
     """An icosphere (320 triangles, radius 15 cm), touching the block at t = 0, pressed
-    off-centre into it at 1 m/s with friction: each rank holds only the triangles near its
-    particles, and the particles, the surface's force and torque are the same, bit for
-    bit, on 1 and 3 ranks."""
+    off-centre into it at 1 m/s, spinning, with friction: each rank holds only the
+    triangles near its particles, and the particles, the surface's force and torque are
+    the same, bit for bit, on 1 and 3 ranks."""
     trimesh.creation.icosphere(subdivisions=2, radius=0.15).export(tmp_path / "sphere.stl")
     scene = tmp_path / "sphere.toml"
     scene.write_text(SPHERE_SCENE)
     assert_same_on_ranks(scene, ["--set", "time.max_steps=40"], tmp_path, ranks=(1, 3))
     h = read_history(tmp_path / "ranks_1")
-    assert h["surface0_force_z"].min() < -100.0 and np.abs(h["surface0_torque_y"]).max() > 1.0  # pressed, off-centre
+    assert h["surface0_force_z"].min() < -100.0 and np.abs(h["surface0_torque_z"]).max() > 1.0  # pressed, spinning
 
 
 BAD = {
