@@ -18,7 +18,7 @@ from parsph import preview
 from parsph.io import read_history
 from physics import run_until, simulation
 
-from conftest import ROOT, RUNS, assert_same_on_ranks, parsph
+from conftest import ROOT, RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
 
 sys.path.insert(0, str(ROOT / "tools"))
 import measure  # noqa: E402
@@ -293,3 +293,21 @@ def test_no_particle_moves_more_than_a_quarter_of_the_margin_in_a_step(plane):
         s.step()
     assert sim.stable.dt * 300.0 <= 0.25 * margin * (1 + 1e-12)
     assert free.stable.dt * 300.0 > margin
+
+
+@pytest.mark.mpi
+def test_a_run_with_a_surface_restarts_bit_for_bit(tmp_path):
+    """punch_stl at a spacing of 1 mm: a checkpoint at step 20, restarted on 2 ranks, ends
+    at step 40 as the run straight through on one (every history row: the surface's force
+    and torque included)."""
+    common = ["--quiet", "--set", "parameters.spacing=1e-3", "--set", "output.history_every=1",
+              "--set", "output.history_interval=0.0"]
+    straight, split = tmp_path / "straight", tmp_path / "split"
+    scene = RUNS / "punch_stl.toml"
+    for out, ranks, extra in ((straight, 1, ["--set", "time.max_steps=40"]),
+                              (split, 1, ["--set", "time.max_steps=20", "--set", "output.checkpoint_every=20"]),
+                              (split, 2, ["--set", "time.max_steps=40", "--restart", "latest"])):
+        proc = parsph(["run", scene, "--out", out, *common, *extra], ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(straight, split)
+    assert np.abs(read_history(split)["surface0_torque_z"]).max() > 0.0
