@@ -78,7 +78,10 @@ def read(path: str, where: str, dim: int) -> tuple:
                          f"(zero {'area' if dim == 3 else 'length'}; {len(bad)} such)")
     if dim == 3:  # shared vertices: the pseudo-normals of edges and vertices need the adjacency
         V, inverse = np.unique(V, axis=0, return_inverse=True)
-        F = inverse.reshape(F.shape)
+        F = np.asarray(inverse).reshape(-1)[F]
+        if not trimesh.Trimesh(V, F, process=False).is_winding_consistent:
+            raise InputError(f"{where} = '{path}': its triangles are not consistently oriented (neighbours list "
+                             "their shared edge in the same direction): which side is outside is ambiguous")
     return V, F
 
 

@@ -68,7 +68,8 @@ def plane(tmp_path):
 def test_a_flat_stl_presses_a_block_as_the_same_wall_plane(plane):
     """A plane rising at 1 m/s from 3 cm below the block's lowest particles: as a two-triangle
     STL and as a [[walls]] plane, the same force history and the same particles, to
-    round-off (the STL's closest points are the plane's feet)."""
+    round-off (the STL's closest points are the plane's feet); as an OBJ of the same
+    triangles with shared vertices, the STL's exactly."""
     wall = simulation(BLOCK + '[[walls]]\npoint = [0.0, 0.0, 0.02]\nnormal = [0.0, 0.0, 1.0]\nvelocity = [0.0, 0.0, 1.0]\n')
     stl = simulation(BLOCK + surface(plane, "translate = [0.0, 0.0, 0.02]\nvelocity = [0.0, 0.0, 1.0]"))
     a, b = run_until(wall, 0.06), run_until(stl, 0.06)
@@ -78,6 +79,11 @@ def test_a_flat_stl_presses_a_block_as_the_same_wall_plane(plane):
     assert np.abs(b["surface0_force_x"]).max() < 1e-9 * np.abs(a["wall0_force_z"]).max()
     (name, drawn), = preview.obstacle_surfaces(stl.scene, stl.X, stl.t)  # the plane where it is
     assert name == "surface0" and np.allclose(drawn[..., 2], 0.02 + stl.t, rtol=0, atol=1e-15)
+    obj = plane.replace(".stl", ".obj")  # the same triangles with shared vertices
+    trimesh.load(plane, process=False).export(obj)
+    assert np.array_equal(run_until(simulation(BLOCK + surface(obj, "translate = [0.0, 0.0, 0.02]\n"
+                                                               "velocity = [0.0, 0.0, 1.0]")), 0.06)["surface0_force_z"],
+                          b["surface0_force_z"])
     rows = wall.group_index("all")
     assert np.allclose(stl.quantity("position", rows), wall.quantity("position", rows), rtol=0, atol=1e-12)
     assert stl.quantity("position", rows)[:, 2].min() >= 0.02 + stl.t - 1e-12  # none left inside
@@ -231,6 +237,8 @@ BAD = {
     "empty": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", r"surfaces\[0\]\.file = '.*bad\.obj': not a surface"),
     "degenerate": (b"v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 4\nf 1 2 3\n",
                    r"surfaces\[0\]\.file = '.*bad\.obj': triangle 1 is degenerate"),
+    "flipped": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 3 4\n",
+                r"surfaces\[0\]\.file = '.*bad\.obj': its triangles are not consistently oriented"),
     "group": (None, r"surfaces\[0\]\.group names group 'tool', which is not defined"),
 }
 
@@ -240,8 +248,8 @@ BAD = {
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_a_bad_surface_is_refused_naming_the_file(case, ranks, tmp_path, plane):
     """A missing file, one no reader understands, one without triangles, one with a
-    triangle of zero area, and an unknown group: exit 2 on every rank with a message
-    naming the key and the file, no traceback."""
+    triangle of zero area, one with a triangle turned against its neighbour, and an unknown
+    group: exit 2 on every rank with a message naming the key and the file, no traceback."""
     content, message = BAD[case]
     name = {"missing": "absent.stl", "unreadable": "bad.ply", "group": plane}.get(case, "bad.obj")
     if content is not None:
