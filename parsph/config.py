@@ -215,8 +215,8 @@ SURFACE_KEYS = {
                                      "its vertices x, y in order, or DXF) (parsph.surfaces)"),
     "group": Key("str", "all", doc="particles that can touch the surface"),
     "scale": Key("float", 1.0, positive, "factor on the file's coordinates"),
-    "rotate": Key("vector", None, doc="rotation of the scaled surface: [angle] about z in 2D, [about x, then y, "
-                                      "then z] in 3D [degrees]"),
+    "rotate": Key("vector", None, doc="rotation of the scaled surface: [angle] in 2D, counter-clockwise; in 3D "
+                                      "the rotation vector [x, y, z], the axis times the angle [degrees]"),
     "translate": Key("vector", None, doc="translation of the scaled, rotated surface to its place at t = 0 [m]"),
     "center": Key("vector", None, doc="the point about which it turns, at t = 0, and of its torque (default the "
                                       "middle of its bounding box) [m]"),

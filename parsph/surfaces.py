@@ -4,8 +4,8 @@ The file: in 3D any triangle mesh trimesh reads (STL, OBJ, PLY, ...), closed or 
 open sheet's outside is the side its triangles' normals face); in 2D a closed outline,
 either a CSV of its vertices (x, y per line, in order; the last joined to the first) or a
 DXF (trimesh.load_path, curves discretised by trimesh) whose closed polylines are the
-outlines. It is scaled, rotated (degrees: about z in 2D, about x, then y, then z in 3D)
-and translated, in that order, into the surface's place at t = 0; then it moves rigidly:
+outlines. It is scaled, rotated (in degrees: counter-clockwise in 2D; in 3D by the
+rotation vector, the axis times the angle) and translated, in that order, into the surface's place at t = 0; then it moves rigidly:
 its centre c (default the middle of its bounding box) by the integral of `velocity`, and
 it turns about c by the rotation vector that is the integral of `angular_velocity` (about
 a fixed axis when the angular velocity keeps its direction); either may be given as
@@ -110,10 +110,11 @@ def _outlines(polylines: list) -> tuple:
 
 
 def _rotation(angles, dim: int) -> np.ndarray:
-    """The matrix of `rotate` (degrees)."""
+    """The matrix of `rotate`: [angle] in 2D, counter-clockwise; the rotation vector (the
+    axis times the angle) in 3D; degrees."""
     if dim == 2:
         return Rotation.from_euler("z", angles[0], degrees=True).as_matrix()[:2, :2]
-    return Rotation.from_euler("xyz", angles, degrees=True).as_matrix()
+    return Rotation.from_rotvec(angles, degrees=True).as_matrix()
 
 
 def _product(a: np.ndarray, M: np.ndarray) -> np.ndarray:

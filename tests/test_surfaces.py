@@ -106,6 +106,18 @@ def test_frictionless_sliding_keeps_the_tangential_momentum_and_friction_takes_i
     assert h["momentum_x"][-1] < 0.95 * h["momentum_x"][0]
 
 
+def test_a_rotated_plane_faces_where_its_rotation_turns_its_normal(plane):
+    """The plane (normal +z) rotated by the rotation vector [0, 90, 0] degrees (a quarter
+    turn about y: its normal turns to +x) and moved to x = -0.03: its triangles lie in
+    that plane, and it stops the block thrown at it along -x (a force along +x)."""
+    throw = '[[initial]]\ntype = "velocity"\nvalue = [-1.0, 0.0, 0.0]\n'
+    sim = simulation(BLOCK + throw + surface(plane, "rotate = [0.0, 90.0, 0.0]\ntranslate = [-0.03, 0.0, 0.0]"))
+    assert np.allclose(sim.walls.items[0].triangles(0.0)[..., 0], -0.03, rtol=0, atol=1e-15)
+    h = run_until(sim, 0.15)  # it reaches the plane at 80 ms
+    assert h["surface0_force_x"].max() > 10.0 and h["surface0_force_x"].min() >= 0.0
+    assert sim.quantity("position", sim.group_index("all"))[:, 0].min() >= -0.03
+
+
 def step_with_impulses(sim, end: float, power) -> tuple:
     """Step `sim` to `end`; returns (history of diagonstics each step, the sum over the steps
     of power(sim, row) times the time the step's impulse stands for, (dt_(n-1) + dt_n) / 2)."""
