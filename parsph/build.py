@@ -290,7 +290,8 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
                 raise InputError(f"groups.{name}: {exc}") from None
     owned["groups"] = groups
     del owned["mesh"], owned["element"]
-    used = {item["group"] for key in ("bc", "tractions", "walls", "tools", "initial", "probes") for item in scene[key]}
+    used = {item["group"] for key in ("bc", "tractions", "walls", "tools", "surfaces", "initial", "probes")
+            for item in scene[key]}
     counts = comm.allreduce(groups.sum(axis=0, dtype=np.int64))
     with collective(comm):
         for name in sorted(used):

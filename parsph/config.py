@@ -21,7 +21,7 @@ import sys
 import tomllib
 from typing import Any
 
-from parsph import expressions, quantities
+from parsph import expressions, quantities, surfaces
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, greater_than, in_range, non_negative, one_of, positive
 from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
@@ -267,6 +267,27 @@ TOOL_KEYS = {
     "radius": Key("float", 0.0, non_negative, "radius of the rounded edges [m]"),
     "velocity": Key("vector", None, doc="the tool's prescribed velocity [m/s] (default at rest)"),
 }
+SURFACE_KEYS = {
+    "file": Key("str", REQUIRED, doc="the surface file, relative to the scene file: in 3D a triangle mesh (STL, OBJ, "
+                                     "PLY, ...; outside: the side its normals face), in 2D a closed outline (CSV of "
+                                     "its vertices x, y in order, or DXF) (parsph.surfaces)"),
+    "group": Key("str", "all", doc="particles that can touch the surface"),
+    "scale": Key("float", 1.0, positive, "factor on the file's coordinates"),
+    "rotate": Key("vector", None, doc="rotation of the scaled surface: [angle] in 2D, counter-clockwise; in 3D "
+                                      "the rotation vector [x, y, z], the axis times the angle [degrees]"),
+    "translate": Key("vector", None, doc="translation of the scaled, rotated surface to its place at t = 0 [m]"),
+    "center": Key("vector", None, doc="the point about which it turns, at t = 0, and of its torque (default the "
+                                      "middle of its bounding box) [m]"),
+    "velocity": Key("vector", None, doc="velocity of the centre [m/s] (default at rest)"),
+    "velocity_expression": Key("strlist", None, doc="instead of velocity: one expression of the time t and the "
+                                                    "parameters per component [m/s]"),
+    "angular_velocity": Key("vector", None, doc="angular velocity about the centre: [w] in 2D, [wx, wy, wz] in 3D "
+                                                "[rad/s] (default none)"),
+    "angular_velocity_expression": Key("strlist", None, doc="instead of angular_velocity: expressions of t "
+                                                            "(its direction fixed in 3D) [rad/s]"),
+    "friction": Key("float", 0.0, non_negative, "Coulomb friction coefficient between the surface and the "
+                                                "particles (0: frictionless)"),
+}
 SYMMETRY_KEYS = {
     "axis": Key("int", REQUIRED, doc="the plane's normal axis (0 = x, 1 = y, 2 = z)"),
     "position": Key("float", REQUIRED, doc="the plane's coordinate on that axis [m]"),
@@ -328,8 +349,8 @@ GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.s
                                              "counted over the bodies in order)"),
     "invert": Key("bool", False, doc="take the particles the selector does not"),
 }
-TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "symmetry",
-                               "initial", "probes", "bodies", "contact")
+TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "surfaces",
+                               "symmetry", "initial", "probes", "bodies", "contact")
 
 
 def _suggest(name: str, known) -> str:
@@ -572,6 +593,26 @@ def _validate_lists(scene: dict, raw: dict, dim: int) -> None:
         if tool["radius"] > 0.5 * smallest:
             raise InputError(f"tools[{i}].radius = {tool['radius']:g} exceeds half the tool's smallest "
                              f"side ({0.5 * smallest:g})")
+
+    scene["surfaces"] = []
+    for i, t in enumerate(_array("surfaces", raw.get("surfaces"))):
+        path = f"surfaces[{i}]"
+        item = _table(path, t, SURFACE_KEYS, dim)
+        check_group(f"{path}.group", item["group"])
+        if dim == 1:
+            raise InputError(f"{path}: surfaces need a 2D or 3D scene")
+        turn = 1 if dim == 2 else 3
+        for key, size in (("translate", dim), ("center", dim), ("velocity", dim), ("velocity_expression", dim),
+                          ("rotate", turn), ("angular_velocity", turn), ("angular_velocity_expression", turn)):
+            if item[key] is not None and len(item[key]) != size:
+                raise InputError(f"{path}.{key} must have {size} components in {dim}D, got {len(item[key])}")
+        for key in ("velocity", "angular_velocity"):
+            if item[key] is not None and item[f"{key}_expression"] is not None:
+                raise InputError(f"{path}: give {key} or {key}_expression, not both")
+            for k, text in enumerate(item[f"{key}_expression"] or ()):
+                expressions.Field(f"{path}.{key}_expression[{k}]", text, raw.get("parameters", {}), 1, ("t",))
+        surfaces.read(item["file"], f"{path}.file", dim)
+        scene["surfaces"].append(item)
 
     scene["symmetry"] = [_table(f"symmetry[{i}]", t, SYMMETRY_KEYS, dim)
                          for i, t in enumerate(_array("symmetry", raw.get("symmetry")))]
@@ -1040,7 +1081,7 @@ def _read(path: str) -> dict:
 
 def _anchor_files(raw: dict, directory: str) -> None:
     """Make the relative `file` paths of the raw scene's parts (and of their boolean parts)
-    relative to `directory`, the scene file's."""
+    and of its [[surfaces]] relative to `directory`, the scene file's."""
     def walk(parts):
         for part in parts if isinstance(parts, list) else ():
             if isinstance(part, dict):
@@ -1052,6 +1093,7 @@ def _anchor_files(raw: dict, directory: str) -> None:
     walk(geometry.get("parts") if isinstance(geometry, dict) else None)
     for body in raw.get("bodies") if isinstance(raw.get("bodies"), list) else ():
         walk(body.get("parts") if isinstance(body, dict) else None)
+    walk(raw.get("surfaces"))
 
 
 def load(path: str, overrides: list[str] = ()) -> dict:

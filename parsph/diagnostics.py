@@ -323,6 +323,7 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
     reduction = reduction or RowReduction(sim.comm)
     energies = global_parts(sim, reduction)
     walls = reduction.add_sums(sim.walls.contacts)  # obstacle-major, then component
+    torques = reduction.add_sums(sim.walls.torques)  # surface-major, then component
     contact = contact_parts(sim, reduction)
     rigid = rigid_parts(sim, reduction)
     probes = probe_parts(sim.scene["probes"], sim, reduction)
@@ -333,6 +334,10 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
     for k, label in enumerate(sim.walls.names):
         for a, name in enumerate("xyz"[: sim.dim]):
             out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * sim.dim + a])
+    axes = "z" if sim.dim == 2 else "xyz"
+    for j, k in enumerate(sim.walls.turning):
+        for a, name in enumerate(axes):
+            out[f"{sim.walls.names[k]}_torque_{name}"] = float(reduction.sums[torques + j * len(axes) + a])
     out.update(contact())
     out.update(rigid())
     out.update(probes())

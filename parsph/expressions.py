@@ -37,12 +37,13 @@ COORDINATES = ("x", "y", "z")
 class Field:
     """One checked expression of position."""
 
-    def __init__(self, path: str, text: str, parameters: dict, dim: int):
+    def __init__(self, path: str, text: str, parameters: dict, dim: int, variables: tuple = None):
         """Raise InputError naming `path` if `text` is not an expression of numbers,
-        `parameters`, the first `dim` coordinates and FUNCTIONS."""
+        `parameters`, the first `dim` coordinates (or the names `variables`, as ("t",)) and
+        FUNCTIONS."""
         self.path, self.text = path, text
         self.parameters = dict(parameters)
-        self.coordinates = COORDINATES[:dim]
+        self.coordinates = COORDINATES[:dim] if variables is None else tuple(variables)
         if len(text) > MAX_LENGTH:
             raise InputError(f"{path}: the expression is {len(text)} characters long (at most {MAX_LENGTH})")
         try:

@@ -123,7 +123,7 @@ def obstacle_surfaces(scene: dict, X: np.ndarray, t: float = 0.0) -> list:
     from parsph.walls import Tool, Wall, Walls
 
     dim = scene["scene"]["dimension"]
-    obstacles = Walls(scene["walls"], scene["tools"], dim)
+    obstacles = Walls(scene["walls"], scene["tools"], dim, scene["surfaces"], scene["parameters"])
     boxes = [box for box in COMM.allgather((X.min(axis=0), X.max(axis=0)) if len(X) else None) if box]
     lower, upper = np.min([lo for lo, _ in boxes], axis=0), np.max([hi for _, hi in boxes], axis=0)
     if COMM.rank != 0 or dim == 1:

@@ -120,7 +120,8 @@ HISTORY = {
     "radius_of_gyration": "m", "energy_error": "1", "momentum_error": "1", "angular_momentum_error": "1",
 }
 HISTORY_PATTERNS = ((r"momentum_(defect_)?[xyz]", "kg m/s"), (r"angular_momentum_(defect_)?[xyz]", "kg m^2/s"),
-                    (r"(wall|tool)[0-9]+_force_[xyz]", "N"), (r"contact_force_[xyz]\..*", "N"),
+                    (r"(wall|tool|surface)[0-9]+_force_[xyz]", "N"),
+                    (r"surface[0-9]+_torque_[xyz]", "N m"), (r"contact_force_[xyz]\..*", "N"),
                     (r"rigid_force_[xyz]\..*", "N"), (r"rigid_torque(_[xyz])?\..*", "N m"))
 
 

@@ -108,3 +108,10 @@ def wall_forces(sim) -> np.ndarray:
     sums over all ranks (collective)."""
     sums = allsum(sim.comm, sim.walls.force_sums())
     return np.array([float(s) for s in sums]).reshape(len(sim.walls.items), sim.dim)
+
+
+def surface_torques(sim) -> np.ndarray:
+    """Each surface's torque about its centre in the last step, (surfaces, 1 in 2D or 3),
+    exact sums over all ranks (collective)."""
+    sums = allsum(sim.comm, sim.walls.torque_sums())
+    return np.array([float(s) for s in sums]).reshape(len(sim.walls.torques), 1 if sim.dim == 2 else 3)

@@ -64,7 +64,7 @@ class Simulation:
         self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
         self.ledger = Ledger(self.bodies)
         self.stable = StableStep(scene["time"])
-        self.walls = Walls(scene["walls"], scene["tools"], dim)
+        self.walls = Walls(scene["walls"], scene["tools"], dim, scene["surfaces"], scene["parameters"])
         self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
         adopt(self, local)
         check_hourglass_stiffness(self)
@@ -83,7 +83,7 @@ class Simulation:
             self.topology.restore(clock)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 self.ledger.restore(carried)
-                self.walls.restore(carried["wall_force"])
+                self.walls.restore(carried["wall_force"], carried.get("surface_torque", ()))
         self.compute_forces()
         if self.contact is not None and restart is None:
             self.contact.check_apart(self.gid, self.body, self.X + self.u, [b.name for b in self.bodies])
@@ -168,6 +168,8 @@ class Simulation:
                                   f"two bodies coincide; the run is unstable: {self.stable.advice()}") from None
             internal += self.contact.force
             seconds["contact"] += clock() - t0
+        if self.walls.turning:
+            self.walls.limit_steps(self.X[:n] + self.u[:n], self.v[:n], self.t, self.step_limit)
         self.internal_force = internal  # the forces between particles (ledger: their impulses)
         force = internal
         if self.body_acc is not None or self.tractions:

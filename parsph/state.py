@@ -144,8 +144,9 @@ def adopt(sim, local: LocalBody) -> None:
     sim.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in sim.bodies)
     sim.f_visc = np.zeros((n if sim.viscous else 0, dim))
     sim.viscous_heating = np.zeros(n if sim.viscous else 0)  # the power the viscosity turns to heat [W]
-    # the step allowed by the particles' motion (closing pairs: viscosity, contact), set at each evaluation
-    sim.step_limit = np.full(n if sim.viscous or sim.scene.get("contact") else 0, np.inf)
+    # the step allowed by the particles' motion (closing pairs: viscosity, contact; surfaces), set at each evaluation
+    limited = sim.viscous or sim.scene.get("contact") or sim.scene.get("surfaces")
+    sim.step_limit = np.full(n if limited else 0, np.inf)
     sim.youngs = np.array([b.constants.youngs for b in sim.bodies])[sim.body]
     arrays = dict(X=sim.X, measure=sim.measure, volume=sim.volume, mass=sim.mass, support=sim.support,
                   groups=fl["groups"][:keep], u=sim.u, v=sim.v, d=sim.d, F=sim.F, fs=sim.fs, f=sim.f,

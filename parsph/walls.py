@@ -1,4 +1,4 @@
-"""Rigid frictionless obstacles with prescribed motion: walls and tools.
+"""Rigid obstacles with prescribed motion: walls, tools and surfaces (parsph.surfaces).
 
 A wall is the plane through p(t) = point + velocity t with unit normal n pointing into the
 material, optionally limited to a box of current positions. A tool is a rigid box
@@ -17,7 +17,8 @@ is its contact force on that particle; the obstacle's force is their exact sum
 drift, (dt_(n-1) + dt_n) / 2: the impulse cancels the approach the particle took from the
 forces of the last half kick of the step before and the first of this one, so that a
 particle pressed against an obstacle shows the force that presses it, on a shortened step
-too.
+too. A surface's contact is the same, relative to its velocity at the particle, with
+Coulomb friction; its torque about its centre is the sum of the levers times the forces.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from parsph.exact_sum import sums
+from parsph.surfaces import Surface
 
 
 class Wall:
@@ -79,14 +81,19 @@ class Tool:
 
 
 class Walls:
-    """The scene's walls and tools acting on this rank's owned particles."""
+    """The scene's walls, tools and surfaces acting on this rank's owned particles."""
 
-    def __init__(self, walls: list, tools: list, dim: int):
-        self.items = [Wall(s) for s in walls] + [Tool(s) for s in tools]
-        self.names = [f"wall{k}" for k in range(len(walls))] + [f"tool{k}" for k in range(len(tools))]
+    def __init__(self, walls: list, tools: list, dim: int, surfaces: list = (), parameters: dict = None):
+        self.items = [Wall(s) for s in walls] + [Tool(s) for s in tools] + [
+            Surface(s, dim, parameters or {}, f"surfaces[{k}]") for k, s in enumerate(surfaces)]
+        self.names = [f"wall{k}" for k in range(len(walls))] + [f"tool{k}" for k in range(len(tools))] + [
+            f"surface{k}" for k in range(len(surfaces))]
         self.dim = dim
         # each obstacle's force on each particle it touched in the last step, kept across select
         self.contacts = [np.zeros((0, dim)) for _ in self.items]
+        # each surface's torque about its centre on those particles ([z] in 2D)
+        self.turning = [k for k, item in enumerate(self.items) if isinstance(item, Surface)]
+        self.torques = [np.zeros((0, 1 if dim == 2 else 3)) for _ in self.turning]
 
     def select(self, masks: dict) -> None:
         """Find each obstacle's particles among this rank's owned ones (group name -> bool
@@ -101,6 +108,7 @@ class Walls:
         force on each particle: its impulse over `span`, the time the impulse stands for
         ((dt_(n-1) + dt_n) / 2, the module's docstring)."""
         free = np.zeros(len(X), bool)  # the free rigid bodies' rows: they meet the obstacles as bodies
+        self._rows = {}  # obstacle -> the rows of its contacts
         for body in rigid_bodies:
             free[body.body.lo:body.body.hi] = True
         for k, item in enumerate(self.items):
@@ -109,6 +117,10 @@ class Walls:
             hit = gap < 0.0
             sel, gap, normal = sel[hit], gap[hit], normal[hit]
             u[sel] -= gap[:, None] * normal
+            self._rows[k] = sel
+            if isinstance(item, Surface):
+                self.contacts[k] = self._slide(item, sel, normal, X[sel] + u[sel], v, mass, t) / span
+                continue
             approach = np.minimum(np.einsum("na,na->n", v[sel] - item.velocity, normal), 0.0)
             v[sel] -= approach[:, None] * normal
             self.contacts[k] = -(mass[sel] * approach)[:, None] * normal / span
@@ -118,10 +130,52 @@ class Walls:
                 rows = item.index[(item.index >= body.body.lo) & (item.index < body.body.hi)]
                 gap, normal = item.contact(X[rows] + u[rows], t)
                 hit = gap < 0.0
-                hits.append((rows[hit], gap[hit], normal[hit], item.velocity))
+                velocity = item.velocity_at(X[rows[hit]] + u[rows[hit]], t) if isinstance(item, Surface) \
+                    else item.velocity
+                hits.append((rows[hit], gap[hit], normal[hit], velocity))
             impulses = body.strike(hits, X, u, v)
             for k, impulse in enumerate(impulses):
                 self.contacts[k] = np.concatenate([self.contacts[k], impulse / span])
+                self._rows[k] = np.concatenate([self._rows[k], hits[k][0]])
+        for j, k in enumerate(self.turning):
+            self.torques[j] = self._moments(self.items[k], k, X, u, t)
+
+    @staticmethod
+    def _slide(item: Surface, sel: np.ndarray, normal: np.ndarray, x: np.ndarray, v: np.ndarray,
+               mass: np.ndarray, t: float) -> np.ndarray:
+        """A surface's change of the velocities v[sel] of the particles it holds at x: their
+        approach relative to its velocity there, and as much of their sliding as Coulomb's
+        law lets the normal impulse stop; returns the impulses."""
+        relative = v[sel] - item.velocity_at(x, t)
+        normal_speed = np.einsum("na,na->n", relative, normal)
+        approach = np.minimum(normal_speed, 0.0)
+        change = -approach[:, None] * normal
+        if item.friction > 0.0:
+            sliding = relative - normal_speed[:, None] * normal
+            speed = np.linalg.norm(sliding, axis=1)
+            held = np.minimum(item.friction * -approach, speed)  # the tangential speed friction takes
+            change -= np.divide(held, speed, out=np.zeros_like(speed), where=speed > 0.0)[:, None] * sliding
+        v[sel] += change
+        return mass[sel, None] * change
+
+    def _moments(self, item: Surface, k: int, X: np.ndarray, u: np.ndarray, t: float) -> np.ndarray:
+        """The moments about a surface's centre of its forces on the particles it touched
+        (the rows it holds, then the free rigid bodies' rows, as self.contacts[k])."""
+        rows = self._rows[k]
+        r, f = item.lever(X[rows] + u[rows], t), self.contacts[k]
+        if self.dim == 2:
+            return (r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0])[:, None]
+        return np.cross(r, f)
+
+    def limit_steps(self, x: np.ndarray, v: np.ndarray, t: float, step_limit: np.ndarray) -> None:
+        """Bound the steps of the owned particles (at x, with velocities v) that can touch a
+        surface: none may move by more than a quarter of its margin relative to it (it sees
+        a particle within half the margin)."""
+        for k in self.turning:
+            item, rows = self.items[k], self.items[k].index
+            speed = np.linalg.norm(v[rows] - item.velocity_at(x[rows], t), axis=1)
+            moving = rows[speed > 0.0]
+            step_limit[moving] = np.minimum(step_limit[moving], 0.25 * item.margin / speed[speed > 0.0])
 
     def force_sums(self) -> list:
         """Each obstacle's force on this rank's particles, exact (obstacle-major, then
@@ -133,7 +187,14 @@ class Walls:
         """Each obstacle's force on this rank's particles, (obstacles, dim)."""
         return np.array([float(s) for s in self.force_sums()]).reshape(len(self.items), self.dim)
 
-    def restore(self, forces) -> None:
-        """Take `forces` (obstacles x dim) as the last step's obstacle forces (restart: the
-        global forces, carried by one rank)."""
+    def restore(self, forces, torques=()) -> None:
+        """Take `forces` (obstacles x dim) and the surfaces' `torques` as the last step's
+        (restart: the global ones, carried by one rank)."""
         self.contacts = [np.array([f], float) for f in forces]
+        if len(torques):
+            self.torques = [np.array([m], float) for m in torques]
+
+    def torque_sums(self) -> list:
+        """Each surface's torque on this rank's particles, exact (surface-major, then
+        component)."""
+        return [s for m in self.torques for s in sums(m)]

@@ -140,12 +140,12 @@ def test_an_obstacle_with_triangles_gives_its_own(monkeypatch):
             return np.array([[[0.0, 0.0, t], [1.0, 0.0, t], [0.0, 1.0, t]]])
 
     class Obstacles(parsph.walls.Walls):
-        def __init__(self, walls, tools, dim):
-            super().__init__(walls, tools, dim)
+        def __init__(self, walls, tools, dim, *surfaces):
+            super().__init__(walls, tools, dim, *surfaces)
             self.items.append(Surface())
             self.names.append("surface0")
 
     monkeypatch.setattr(parsph.walls, "Walls", Obstacles)
-    scene = {"scene": {"dimension": 3}, "walls": [], "tools": []}
+    scene = {"scene": {"dimension": 3}, "walls": [], "tools": [], "surfaces": [], "parameters": {}}
     (name, triangles), = preview.obstacle_surfaces(scene, np.zeros((1, 3)))
     assert name == "surface0" and np.array_equal(triangles, Surface().triangles(0.0))

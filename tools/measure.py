@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Measurements on [R]'s scenes from a run's snapshots.
+"""Measurements on the scenes from a run's snapshots and history.
 
   tools/measure.py bands OUT   shear bands (runs/ring_shear_bands.toml): at each snapshot, the
                                particles (not the loaded inner row) whose plastic strain is in
@@ -30,6 +30,11 @@
                                through-crack: the first snapshot where no chain of intact
                                elements sharing faces joins the grips (time, elongation, the
                                failed elements' axial reference position: median, quartiles).
+  tools/measure.py punch_stl OUT_STL OUT_TOOL
+                               the punch as a surface file (runs/punch_stl.toml) against the
+                               tool (runs/punch.toml): the two forces at the history rows of
+                               both, the largest relative difference over the rows where the
+                               tool's force exceeds a tenth of its last value, and at the end.
 """
 
 from __future__ import annotations
@@ -293,9 +298,32 @@ def specimen(out: str) -> None:
     print("no through-crack by the last snapshot")
 
 
-COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "kirsch": kirsch, "specimen": specimen}
+def stroke_difference(a: dict, b: dict) -> tuple:
+    """(times, surface force, tool force, largest relative difference where the tool's force
+    exceeds a tenth of its last value, relative difference at the last row) of the punch's
+    force, surface0_force_y of the history `a` against tool0_force_y of `b`, at the rows of
+    `a` (the tool's force interpolated linearly to their times, which differ by the stable
+    steps)."""
+    times = a["time"][a["time"] <= b["time"][-1]]
+    fa, fb = a["surface0_force_y"][: len(times)], np.interp(times, b["time"], b["tool0_force_y"])
+    loaded = np.abs(fb) > 0.1 * abs(fb[-1])
+    relative = np.divide(np.abs(fa - fb), np.abs(fb), out=np.zeros_like(fb), where=fb != 0.0)
+    return times, fa, fb, float(relative[loaded].max()), float(relative[-1])
+
+
+def punch_stl(surface_out: str, tool_out: str) -> None:
+    times, fa, fb, worst, end = stroke_difference(read_history(surface_out), read_history(tool_out))
+    print("   t [ms]  surface [N/m]     tool [N/m]   difference")
+    for t, x, y in zip(times, fa, fb):
+        print(f"{1e3 * t:9.3f}  {x:13.6g}  {y:13.6g}  {abs(x - y) / abs(y) if y else 0.0:11.2e}")
+    print(f"{len(times)} rows; largest relative difference where the tool's force exceeds a tenth of its last "
+          f"value: {worst:.2e}; at t = {1e3 * times[-1]:.3f} ms: {end:.2e}")
+
+
+COMMANDS = {"bands": bands, "hoop": hoop, "drained": drained, "kirsch": kirsch, "specimen": specimen,
+            "punch_stl": punch_stl}
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3 or sys.argv[1] not in COMMANDS:
+    if len(sys.argv) < 3 or sys.argv[1] not in COMMANDS:
         sys.exit(__doc__)
-    COMMANDS[sys.argv[1]](sys.argv[2])
+    COMMANDS[sys.argv[1]](*sys.argv[2:])

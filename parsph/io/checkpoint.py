@@ -120,6 +120,7 @@ def state_of(sim) -> dict:
         "fields": sim.particles.checkpointed(), "group_names": sim.group_names,
         "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in sim.point_sets()[1:]},
         "totals": {**sim.ledger.checkpoint(sim.comm), "wall_force": readouts.wall_forces(sim).tolist(),
+                   "surface_torque": readouts.surface_torques(sim).tolist(),
                    "rigid": [body.state() for body in sim.rigid_bodies]},
         "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
                   "updates": sim.topology.count, "since_update": sim.topology.since, "first_stable": sim.stable.first},
