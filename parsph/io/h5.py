@@ -13,6 +13,7 @@ import os
 import h5py
 import numpy as np
 
+from parsph.parallel.decomposition import block_cuts
 from parsph.parallel.runtime import warn
 
 # PARSPH_SERIAL_HDF5=1 forces the rank-0 path (tests; file systems where MPI-IO misbehaves)
@@ -68,7 +69,7 @@ class ParticleFile:
             dtype = next((d for d in self.comm.allgather(dtype if len(rows) else None) if d), dtype)
         if self.collective:
             dset = self.file.create_dataset(name, shape=shape, dtype=dtype)
-            _write_runs(dset, gid, rows.astype(dtype, copy=False))
+            _write_runs(dset, *_blocks(gid, rows.astype(dtype, copy=False), total, self.comm))
             return
         parts = self.comm.gather((gid, rows), root=0)
         if self.comm.rank == 0:
@@ -86,6 +87,18 @@ def runs(gid: np.ndarray):
     starts = np.concatenate([[0], breaks])
     counts = np.diff(np.concatenate([starts, [len(gid)]]))
     return gid[starts], counts
+
+
+def _blocks(gid: np.ndarray, rows: np.ndarray, total: int, comm) -> tuple:
+    """(gid, rows) of the rows this rank writes: those of ids cuts[r]..cuts[r+1]-1 (block_cuts),
+    sent to it by the ranks that hold them, in id order. A rank's particles are scattered
+    over many short runs of ids; one run per rank keeps the collective write's selection
+    simple (HDF5's union of thousands of hyperslabs is slow)."""
+    bounds = np.searchsorted(gid, block_cuts(total, comm.size))
+    received = comm.alltoall([(gid[a:b], rows[a:b]) for a, b in zip(bounds[:-1], bounds[1:])])
+    gid = np.concatenate([g for g, _ in received])
+    order = np.argsort(gid, kind="stable")
+    return gid[order], np.concatenate([r for _, r in received])[order]
 
 
 def _write_runs(dset, gid: np.ndarray, rows: np.ndarray) -> None:
