@@ -172,7 +172,7 @@ PART_KEYS: dict[str, dict[str, Key]] = {
                                          "them), relative to the scene file's directory: a particle at each "
                                          "element's centroid with its volume"),
         "scale": Key("float", 1.0, positive, "factor on the mesh's coordinates (1e-3 for a mesh in mm)"),
-        "translate": Key("vector", None, doc="added to the scaled coordinates [m]"),
+        "translate": Key("vector", None, doc="added to the scaled, mirrored and rotated coordinates [m]"),
         "cells": Key("strlist", None, doc="only the elements of these mesh sets (default: all the elements of "
                                           "the scene's dimension)"),
     },
@@ -221,6 +221,7 @@ SOLID_KEYS: dict[str, dict[str, Key]] = {
        for kind, how in (("union", "united"), ("difference", "the first minus the others"),
                          ("intersection", "intersected"))},
 }
+PART_KEYS["mesh"].update({k: TRANSFORM_KEYS[k] for k in ("mirror", "rotate")})
 SOLIDS = tuple(SOLID_KEYS)
 for _shape, _keys in SOLID_KEYS.items():
     PART_KEYS[_shape] = {**_keys, **FILL_KEYS, **TRANSFORM_KEYS}

@@ -232,6 +232,27 @@ def bar_mesh():
     return points, cells, np.array(faces), left
 
 
+
+def test_mirror_and_rotate_move_volume_centroid_and_inertia(tmp_path):
+    """A tetrahedral box mirrored in y and turned by a rotation vector, as a solid part is:
+    volume, first and second moments are the box's mapped by A = R M (the mirrored elements
+    keep positive volumes)."""
+    from scipy.spatial.transform import Rotation
+    lower, upper = [0.5, -1.0, 2.0], [2.5, 0.5, 3.0]
+    points, cells = box_cells("tetra", (4, 3, 2), lower, upper)
+    meshio.write(tmp_path / "box.vtu", meshio.Mesh(points, [("tetra", cells)]))
+    part = MeshPart(str(tmp_path / "box.vtu"), scale=2.0, translate=[1.0, 2.0, 3.0], dimension=3, mirror=1,
+                    rotate=[0.0, 30.0, 45.0])
+    A = Rotation.from_rotvec([0.0, 30.0, 45.0], degrees=True).as_matrix() @ np.diag([1.0, -1.0, 1.0]) * 2.0
+    t = np.array([1.0, 2.0, 3.0])
+    volume, first, inertia = exact_box(lower, upper)
+    x, v = part.rows(0, part.count)
+    assert (v > 0).all() and v.sum() == pytest.approx(8.0 * volume, rel=1e-12)
+    assert v @ x / v.sum() == pytest.approx(A @ (first / volume) + t, rel=1e-12)
+    y = (x - t) @ np.linalg.inv(A).T  # back in the file's frame: the centroids, exactly placed
+    x0, v0 = MeshPart(str(tmp_path / "box.vtu"), dimension=3).rows(0, part.count)
+    assert y == pytest.approx(x0, abs=1e-12) and v == pytest.approx(8.0 * v0, rel=1e-12)
+
 def test_gmsh_physical_groups_select_their_elements_and_face_groups_the_elements_on_them(tmp_path):
     points, cells, faces, _ = bar_mesh()
     physical = np.where(np.arange(len(cells)) % 6 < 3, 1, 2)  # x < 3: group 1

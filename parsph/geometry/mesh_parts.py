@@ -27,6 +27,7 @@ import os
 import numpy as np
 
 from .lattice import _check_count
+from .solids import _affine
 
 # corner nodes of each element type as a collapsed hexahedron (3D) or quadrilateral (2D)
 CORNERS = {"hexahedron": [0, 1, 2, 3, 4, 5, 6, 7], "tetra": [0, 1, 2, 2, 3, 3, 3, 3],
@@ -79,14 +80,15 @@ def volumes_and_centroids(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 class MeshPart:
     """The elements of dimension `dimension` of the mesh `file` (optionally only those of the
-    mesh sets `cells`), scaled by `scale` about the origin then translated by `translate`
+    mesh sets `cells`), scaled by `scale` about the origin, mirrored, rotated (as a solid part,
+    geometry.solids) and translated by `translate`
     (`points`, the nodes so placed): `count` particles, in the file's order (cell block after
     cell block), at the elements' centroids with their volumes; `spacing` is the mean
     (volume / count)^(1/D)."""
 
     blockwise = True  # rows(start, stop) slices the elements read
 
-    def __init__(self, file, scale=1.0, translate=None, cells=None, dimension=3):
+    def __init__(self, file, scale=1.0, translate=None, cells=None, dimension=3, mirror=None, rotate=None):
         import meshio
 
         self.file, self.dim = file, dimension
@@ -132,6 +134,9 @@ class MeshPart:
                 raise ValueError(f"mesh file {file}: a 2D scene needs a plane mesh (z constant), "
                                  f"its z spans {z.min():g} to {z.max():g}")
         x = points[:, :dimension] * float(scale)
+        if mirror is not None or rotate is not None:
+            A, _ = _affine({"mirror": mirror, "rotate": rotate}, f"mesh file {file}", dimension)
+            x = x @ A.T
         if translate is not None:
             x = x + np.asarray(translate, np.float64)
         self.points = x
