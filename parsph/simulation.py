@@ -84,9 +84,9 @@ class Simulation:
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"], carried.get("surface_torque", ()))
-        self.compute_forces()
         if self.contact is not None and restart is None:
-            self.contact.check_apart(self.gid, self.body, self.X + self.u, [b.name for b in self.bodies])
+            self.contact.check_apart(self.gid, self.body, self.X[:n] + self.u[:n], [b.name for b in self.bodies])
+        self.compute_forces()
         self.ledger.external = external_force(self)  # at the current state, for the work integral
         self.stable.start(self, restart["clock"] if restart else None)
 
