@@ -26,7 +26,7 @@ from numba import njit
 from parsph import readouts
 from parsph.exact_sum import SCALE, Exact, totals
 from parsph.fields import MOMENT_COMPONENTS
-from parsph.balance import TERMS
+from parsph.interactions import TERMS
 from parsph.rigid import moments
 
 

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from parsph import fields
-from parsph.balance import TERMS
+from parsph.interactions import TERMS
 
 
 @dataclass(frozen=True)
