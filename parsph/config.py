@@ -944,8 +944,8 @@ def validate(raw: dict) -> dict:
     if "contact" in raw:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
     if "ties" in raw:
-        scene["ties"] = ties.check([_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))],
-                                   scene, bodies(scene), _moves)
+        entries = [_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))]
+        scene["ties"] = ties.check(entries, scene, bodies(scene), _moves)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 

@@ -29,7 +29,9 @@ from parsph.contact import Contact
 @dataclass(frozen=True)
 class Kind:
     """A kind of interaction: its scene key, builder (the adopted state -> the interaction or
-    None), the balance terms it adds and the running totals the ledger keeps for it."""
+    None), the balance terms it adds (first its energy, the interaction's `energy` per owned
+    particle; then running totals of the ledger of the same keys) and the running totals the
+    ledger keeps for it."""
 
     key: str
     build: Callable

@@ -98,8 +98,9 @@ def check(entries: list, scene: dict, bodies: list, moves) -> list:
         for name in pair:
             body = bodies[names.index(name)]
             if body.get("rigid", False) or moves(body):
-                raise InputError(f"{path}.bodies: body '{name}' is {'rigid' if body.get('rigid') else 'of an updated reference'}; "
-                                 "ties join total-Lagrangian bodies (their partners are found once in the reference)")
+                what = "rigid" if body.get("rigid", False) else "of an updated reference"
+                raise InputError(f"{path}.bodies: body '{name}' is {what}; ties join total-Lagrangian bodies "
+                                 "(their partners are found once in the reference)")
     if entries and scene["symmetry"]:
         raise InputError("[[ties]] with [[symmetry]] planes is not supported: the mirror images are not tied; "
                          "model both sides")
@@ -188,7 +189,8 @@ class Ties:
         self.k_t = np.where((G[p] > 0) & (G[q] > 0), factor * 2.0 / (gap * (1.0 / np.where(G[p] > 0, G[p], 1.0)
                                                                               + 1.0 / np.where(G[q] > 0, G[q], 1.0))),
                             0.0)
-        self.strength = np.array([[s["normal_strength"], s["shear_strength"]] for s in specs]).reshape(-1, 2)[self.entry]
+        strength = np.array([[s["normal_strength"], s["shear_strength"]] for s in specs]).reshape(-1, 2)
+        self.strength = strength[self.entry]
         self.reduced = sim.mass[p] * sim.mass[q] / (sim.mass[p] + sim.mass[q])
         self.broken = np.zeros(len(j), np.bool_)
         self.jump = np.zeros((len(j), dim))  # w at the last evaluation

@@ -106,6 +106,21 @@ def test_the_tie_breaks_when_the_reflected_wave_brings_its_strength_and_the_bars
     assert np.abs(rows["momentum_defect_x"]).max() < 1.0e-12 * np.abs(rows["momentum_x"]).max()
 
 
+def test_with_contact_the_tie_breaks_alike_and_both_springs_bound_the_step():
+    """bonded_bars with [[contact]] between the bars as well (it carries nothing in tension):
+    the tie breaks at 3L/c to 1 %, the stable step's bound is the sum of both interactions'
+    springs (at the start, tied), and the total energy stays constant to 1e-3 of the work put in."""
+    text = SCENE.replace("[[ties]]", '[[contact]]\nbodies = ["left", "right"]\n\n[[ties]]')
+    sim = simulation(text)
+    assert [i.name for i in sim.interactions] == ["contact", "ties"]
+    assert (sim.omega_c2 == sim.contact.omega2 + sim.ties.omega2).all() and sim.ties.omega2.max() > 0
+    rows = run_until(sim, 3.5e-5, probe=face_series)
+    broken = np.array([p[2] for p in rows["probe"]])
+    assert abs(rows["time"][np.argmax(broken > 0)] / (3.0 * L / WAVE_SPEED) - 1.0) < 0.01
+    drift = rows["total_energy"] - rows["total_energy"][0]
+    assert np.abs(drift).max() < 1.0e-3 * rows["external_work"][-1]
+
+
 @pytest.mark.parametrize("opening, sliding, breaks", [(0.59, 0.0, False), (0.61, 0.0, True), (-5.0, 0.0, False),
                                                       (0.0, 0.79, False), (0.0, 0.81, True),
                                                       (0.4, 0.55, False), (0.45, 0.6, True)])
@@ -125,8 +140,8 @@ def test_one_pair_fails_by_the_quadratic_criterion(opening, sliding, breaks):
         _tie(2, ptr, np.array([other]), np.array([i == 0]), u, np.zeros((2, 2)), np.array([[0.0, 1.0]]),
              np.array([2.0e-4]), np.array([1.0e11]), np.array([0.5e11]), np.array([[60.0e6, 40.0e6]]),
              np.array([1.0]), np.array([0.0]), np.array([0]), np.ones(2), np.zeros(1, np.bool_),
-             (u[1] - u[0])[None, :].copy(), out["force"], out["dissipation"], out["energy"], out["omega2"], out["released"],
-             out["entry_force"])
+             (u[1] - u[0])[None, :].copy(), out["force"], out["dissipation"], out["energy"], out["omega2"],
+             out["released"], out["entry_force"])
         rows[i] = out
     sigma, tau = 1.0e11 * opening * 1e-3, 0.5e11 * sliding * 1e-3
     assert ((max(sigma, 0.0) / 60e6) ** 2 + (tau / 40e6) ** 2 >= 1.0) == breaks
@@ -156,7 +171,7 @@ def test_ties_are_the_same_on_1_2_and_3_ranks_and_across_a_restart_after_the_bre
     assert history["tie_released"][-1] > 0.0 and history["tie_energy"][-1] == 0.0
     split = tmp_path / "split"
     proc = parsph(["run", RUNS / "bonded_bars.toml", "--out", split, "--quiet", *coarse, "--set",
-                   "time.max_steps=330", "--set", "output.checkpoint_every=330"], ranks=2)
+                   "time.max_steps=400", "--set", "output.checkpoint_every=400"], ranks=2)
     assert proc.returncode == 0, proc.stderr
     assert read_history(split)["tie_released"][-1] > 0.0  # the checkpoint has the tie broken
     proc = parsph(["run", RUNS / "bonded_bars.toml", "--out", split, "--quiet", *coarse, "--restart", "latest"],
