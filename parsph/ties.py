@@ -51,15 +51,17 @@ from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, in_range, non_negative, positive
 from parsph.neighbors import pair_keys
 
-SPACINGS = 1.5  # the default distance, in the larger of the two bodies' largest particle spacings
+SPACINGS = 1.2  # the default distance, in the larger of the two bodies' largest particle spacings: on
+#               matching lattices the particle facing it only (a diagonal partner, at sqrt(2), would
+#               leave the face's edges softer than its middle)
 
 TIE_KEYS = {
     "bodies": Key("strlist", REQUIRED, doc="the names of the two bodies bonded along their common face "
                                            "(parsph.ties)"),
     "distance": Key("float", 0.0, non_negative,
                     "a particle is tied to the other body's particles within this distance of it in the "
-                    "reference [m] (0: 1.5 times the larger particle spacing of the two bodies; at most the "
-                    "largest kernel support, the halo's reach)"),
+                    "reference [m] (0: 1.2 times the larger particle spacing of the two bodies, the facing "
+                    "particle on matching lattices; at most the largest kernel support, the halo's reach)"),
     "stiffness": Key("float", 1.0, in_range(0.01, 1.0e4),
                      "factor on the tie's penalty stiffness (1: the bodies' moduli over the gap between the tied "
                      "particles, as stiff as the material; a larger factor shortens the step)"),
