@@ -215,10 +215,6 @@ class Ties:
         if broke:
             self.ledger.add("tie_released", self.released)
 
-    def tied(self) -> int:
-        """The owned particles' unbroken ties (each pair on both of its sides)."""
-        return int(np.count_nonzero(~self.broken))
-
     def broken_keys(self) -> np.ndarray:
         """The pair keys (neighbors.pair_keys) of all ranks' broken ties, sorted (collective)."""
         mine = self.keys[self.broken]

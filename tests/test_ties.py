@@ -167,6 +167,17 @@ def test_with_contact_the_tie_breaks_alike_and_both_springs_bound_the_step():
     assert np.abs(drift).max() < 1.0e-3 * rows["external_work"][-1]
 
 
+def test_the_ties_dashpots_work_is_booked():
+    """With damping 0.5 the dashpots take energy (tie_work > 0), the tie still breaks near 3L/c
+    and the total energy, with the tie work, stays constant to 1e-3 of the work put in."""
+    sim = simulation(SCENE.replace("shear_strength = 60.0e6", "shear_strength = 60.0e6\ndamping = 0.5"))
+    rows = run_until(sim, 3.5e-5, probe=face_series)
+    assert rows["tie_work"][-1] > 0.05 * rows["tie_energy"].max()  # 16 % of it
+    assert np.array([p[2] for p in rows["probe"]])[-1] == 2
+    drift = rows["total_energy"] - rows["total_energy"][0]
+    assert np.abs(drift).max() < 1.0e-3 * rows["external_work"][-1]
+
+
 @pytest.mark.parametrize("opening, sliding, breaks", [(0.59, 0.0, False), (0.61, 0.0, True), (-5.0, 0.0, False),
                                                       (0.0, 0.79, False), (0.0, 0.81, True),
                                                       (0.4, 0.55, False), (0.45, 0.6, True)])
