@@ -30,13 +30,15 @@ from parsph.contact import Contact
 class Kind:
     """A kind of interaction: its scene key, builder (the adopted state -> the interaction or
     None), the balance terms it adds (first its energy, the interaction's `energy` per owned
-    particle; then running totals of the ledger of the same keys) and the running totals the
-    ledger keeps for it."""
+    particle; then running totals of the ledger of the same keys), the running totals the
+    ledger keeps for it and its history series beyond them (contact's are
+    diagnostics.contact_parts)."""
 
     key: str
     build: Callable
     terms: tuple = ()
     running: tuple = ()
+    columns: Callable | None = None  # (sim, diagnostics.RowReduction) -> () -> its history series
 
 
 def _contact(sim):
@@ -55,7 +57,7 @@ KINDS = (
           Term("contact_work", "contact_work",
                present=lambda sim: sim.contact is not None and sim.contact.dissipative)),
          ("contact_work",)),
-    Kind("ties", ties.build, ties.TERMS, ties.RUNNING),
+    Kind("ties", ties.build, ties.TERMS, ties.RUNNING, ties.columns),
 )
 
 TERMS = balance.TERMS + tuple(term for kind in KINDS for term in kind.terms)  # every term of the balance
@@ -101,6 +103,12 @@ def add_frequencies(present: list, into: np.ndarray) -> None:
         into[:] = present[0].omega2
         for interaction in present[1:]:
             into += interaction.omega2
+
+
+def columns(sim, reduction) -> list:
+    """The present interactions' history series (Kind.columns), as functions that give them
+    once `reduction` is reduced."""
+    return [kind.columns(sim, reduction) for kind in KINDS if kind.columns and sim.interaction[kind.key] is not None]
 
 
 def checkpoint(present: list) -> dict:

@@ -229,6 +229,28 @@ class Ties:
         self.broken |= np.isin(self.keys, np.asarray(carried.get("ties_broken", []), np.int64))
 
 
+def columns(sim, reduction):
+    """The ties' history series: each entry's force on its first body from its second,
+    "tie_force_X.FIRST.SECOND" [N], and its broken ties, "ties_broken.FIRST.SECOND" (each
+    counted on both sides, halved). Returns the function that gives them once `reduction`
+    (diagnostics.RowReduction) is reduced."""
+    ties, dim = sim.ties, sim.dim
+    at = reduction.add_sums([ties.entry_force[k, sim.bodies[first].lo:sim.bodies[first].hi]
+                             for k, (first, _) in enumerate(ties.entries)])
+    broken = np.bincount(ties.entry[ties.broken], minlength=len(ties.entries)).astype(np.float64)
+    counts = reduction.add_sums([broken[None, :]])
+
+    def values() -> dict:
+        out = {}
+        for k, label in enumerate(ties.labels):
+            for a, name in enumerate("xyz"[:dim]):
+                out[f"tie_force_{name}.{label}"] = float(reduction.sums[at + k * dim + a])
+            out[f"ties_broken.{label}"] = 0.5 * float(reduction.sums[counts + k])
+        return out
+
+    return values
+
+
 def build(sim) -> Ties | None:
     """The ties of the scene's [[ties]], or None."""
     return Ties(sim.scene["ties"], sim) if sim.scene.get("ties") else None
