@@ -225,7 +225,8 @@ def test_ties_are_the_same_on_1_2_and_3_ranks_and_across_a_restart_after_the_bre
     assert proc.returncode == 0, proc.stderr
     assert_identical_outputs(tmp_path / "bars" / "ranks_1", tmp_path / "bars" / "ranks_3")
     history = read_history(tmp_path / "bars" / "ranks_1")
-    assert history["tie_released"][-1] > 0.0 and history["tie_energy"][-1] == 0.0
+    assert history["ties_broken.left.right"][-1] == 1.0 and history["tie_energy"][-1] == 0.0
+    assert history["tie_force_x.left.right"].max() > 0.9 * STRENGTH * AREA  # it carried its strength
     split = tmp_path / "split"
     proc = parsph(["run", RUNS / "bonded_bars.toml", "--out", split, "--quiet", *coarse, "--set",
                    "time.max_steps=400", "--set", "output.checkpoint_every=400"], ranks=2)
