@@ -87,6 +87,14 @@ def damping_ratio(restitution: float) -> float:
 class Contact:
     """The scene's contact pairs of bodies, on this rank's particles."""
 
+    name, reads, work = "contact", (), "contact_work"  # parsph.interactions: its own halo
+
+    def checkpoint(self) -> dict:  # parsph.interactions: the lists are found again on restart
+        return {}
+
+    def restore(self, totals: dict) -> None:
+        pass
+
     def __init__(self, specs: list, bodies: list, body: np.ndarray, measure: np.ndarray, mass: np.ndarray,
                  gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm):
         """specs: the scene's [[contact]] tables; bodies: the simulation's bodies (names,
