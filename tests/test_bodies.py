@@ -95,8 +95,8 @@ def test_bodies_within_a_kernel_support_are_not_neighbours():
     raw["bodies"][1]["parts"][0]["lower"][0] = 0.1  # touching: one spacing between the lattices
     raw["bodies"][1]["parts"][0]["upper"][0] = 0.2
     sim = _sim(raw)
-    rows = np.repeat(np.arange(sim.n_owned), np.diff(sim.ref.ptr))
-    assert len(rows) and np.array_equal(sim.body[rows], sim.body[sim.ref.idx])
+    rows = np.repeat(np.arange(sim.n_owned), np.diff(sim.topology.relations[0].ref.ptr))
+    assert len(rows) and np.array_equal(sim.body[rows], sim.body[sim.topology.relations[0].ref.idx])
     near = np.abs(sim.X[:, 0] - 0.1) < 0.01  # both bodies' particles next to the joint
     assert set(sim.body[near]) == {0, 1}
 
