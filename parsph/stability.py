@@ -180,11 +180,10 @@ def check_hourglass_stiffness(sim) -> None:
     """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
     frequency squared, overflows (an absurd formulation.hourglass). At set-up."""
     n = sim.n_owned
-    refs = [r.ref for r in sim.topology.relations if len(r.ref.hgc)]
-    if not sim.hourglass or not refs:
+    if not sim.hourglass:
         return
     out = np.zeros(n)
-    for ref in refs:  # the rows of a relation's bodies
+    for ref in (r.ref for r in sim.topology.relations if len(r.ref.hgc)):  # the rows of a relation's bodies
         rows = np.repeat(np.arange(n), np.diff(ref.ptr))
         with np.errstate(over="ignore", invalid="ignore"):
             k = ref.hgc * (sim.youngs[rows] + sim.youngs[ref.idx])
