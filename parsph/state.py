@@ -56,10 +56,12 @@ class Body:
 
 def settle(sim) -> None:
     """What the bodies settle for the whole particle set: whether a reference moves (in
-    every step: Eulerian), the Hessian stabilisation and hourglass control the bodies
-    share, and the owners of the registered fields the particles carry (parsph.fields)."""
+    every step: Eulerian), whether some body has Hessian stabilisation or hourglass control
+    (their arrays), and the owners of the registered fields the particles carry
+    (parsph.fields). Each body's kernel, eta and schedule are its kernel relation's
+    (parsph.kernel_relation)."""
     forms = [b.formulation for b in sim.bodies]
-    moving = [b.formulation for b in sim.bodies if b.moves]  # their reference moves, together (config)
+    moving = [b.formulation for b in sim.bodies if b.moves]  # their reference moves (all ulsph or all Eulerian: config)
     sim.updated = bool(moving)
     sim.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
     sim.eta = max(f.eta for f in forms)  # > 0: some body has Hessian stabilisation (its relation's eta)

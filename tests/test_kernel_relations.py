@@ -67,14 +67,20 @@ KERNELS = {"steel": ("", ""), "rubber": ('type = "sph"', 'type = "wendland_c2"\n
 HESSIAN = {"steel": ("hessian = 0.3", ""), "rubber": ('hessian = 0.6\nhessian_correction = "paper"', "")}
 
 
-def test_updated_bodies_with_their_own_schedules_each_move_as_alone():
+BY_STRAIN = {"steel": UPDATED["steel"], "rubber": ('type = "ulsph"\nupdate_strain = 3e-3\nhourglass = 20.0', "")}
+
+
+@pytest.mark.parametrize("bodies", [UPDATED, BY_STRAIN], ids=["by_count", "by_count_and_strain"])
+def test_updated_bodies_with_their_own_schedules_each_move_as_alone(bodies):
     """Two ulsph bodies updated every 3 and every 5 steps (the second searching at every
-    other update): two relations, each updating on its own schedule; each body bit for
-    bit as alone."""
-    both = stepped(blocks(UPDATED))
-    assert [r.count for r in both.topology.relations] == [STEPS // 3, STEPS // 5]
-    alones = {name: stepped(blocks({name: UPDATED[name]})) for name in UPDATED}
-    assert alones["steel"].topology.count == STEPS // 3 and alones["rubber"].topology.count == STEPS // 5
+    other update), or every 3 steps and by a log strain of 3e-3 [V §3.1]: two relations,
+    each updating on its own schedule, as often as its body alone and not as often as the
+    other; each body bit for bit as alone."""
+    both = stepped(blocks(bodies))
+    alones = {name: stepped(blocks({name: bodies[name]})) for name in bodies}
+    counts = [r.count for r in both.topology.relations]
+    assert counts == [alones["steel"].topology.count, alones["rubber"].topology.count]
+    assert counts[0] == STEPS // 3 and 0 < counts[1] != counts[0]
     lo, hi = both.bodies[1].lo, both.bodies[1].hi
     assert np.array_equal(both.Xr[lo:hi], alones["rubber"].Xr[: alones["rubber"].n_owned])
     assert_each_as_alone(both, alones)
@@ -110,7 +116,8 @@ def test_bodies_with_their_own_hessian_stabilisation_each_move_as_alone():
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("bodies", [UPDATED, KERNELS, HESSIAN], ids=["schedules", "kernels", "hessian"])
+@pytest.mark.parametrize("bodies", [UPDATED, BY_STRAIN, KERNELS, HESSIAN],
+                         ids=["schedules", "strain", "kernels", "hessian"])
 def test_relations_are_the_same_on_1_and_3_ranks_and_across_a_restart(bodies, tmp_path):
     """One rank straight through against two ranks to step 40 (between the updates of one
     relation, just after the other's) and three after the restart: the same bit for bit."""
