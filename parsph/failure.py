@@ -10,7 +10,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import conditions
-from parsph.formulations import reference
+from parsph.kernel_relation import Configuration
 from parsph import materials
 from parsph.ledger import intact_law_work, start_damage_work
 from parsph.materials import damage
@@ -89,18 +89,16 @@ class Failure:
             detached = self.failed(state, sim.body)
             with collective(sim.comm):
                 cut = self.crack(searched, sim.X, sim.measure, sim.gid, n, detached)
-                ref = reference.build(
-                    sim.X, sim.measure, sim.volume, sim.support, sim.gid, n, sim.decomp.n_rows,
-                    sim.scene["kernel"]["type"], sim.body, [b.formulation.pair_options for b in sim.bodies],
-                    sim.eta, sim.weighted_hessian, detached=detached, cut=cut,
-                    tolerant=True)
-            if not sim.comm.allreduce(len(ref.bad)):
+                bad = sim.topology.build(Configuration(sim.X, sim.measure, sim.volume, sim.support, sim.gid,
+                                                       sim.body, n, sim.decomp.n_rows),
+                                         detached=detached, cut=cut, tolerant=True)
+            if not sim.comm.allreduce(len(bad)):
                 break
             for b in (b for b in self.bodies if b.failure):  # cut off from their bodies: they fail too
-                cut_off = ref.bad[(ref.bad >= b.lo) & (ref.bad < b.hi)]
+                cut_off = bad[(bad >= b.lo) & (bad < b.hi)]
                 start_damage_work(sim, b, cut_off[state[cut_off, damage.DAMAGE] == 0.0])
-            state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
-        sim.ref, self.detached = ref, detached  # the stages read sim.ref when they run
+            state[bad, damage.DAMAGE] = trial[bad, damage.DAMAGE] = 1.0
+        self.detached = detached  # the stages read their relation's reference data when they run
         sim.exclude_kernel_pairs()
         penalty = sim.hg_psi.copy()
         held = intact_law_work(sim)

@@ -155,7 +155,7 @@ def pair_components(sim) -> np.ndarray:
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    n, ref = sim.n_owned, sim.ref
+    n, ref = sim.n_owned, sim.topology.relations[0].ref
     graph = csr_matrix((np.ones(len(ref.idx)), ref.idx, ref.ptr), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 
@@ -184,8 +184,8 @@ def test_with_pair_breaking_the_crack_opens_and_the_strip_comes_apart(breaking):
     if not breaking:
         assert len(intact) == 1
         return
-    assert failed.sum() > 10 and not np.isin(np.flatnonzero(failed), sim.ref.idx).any()
-    assert np.all(np.diff(sim.ref.ptr)[failed] == 0)
+    assert failed.sum() > 10 and not np.isin(np.flatnonzero(failed), sim.topology.relations[0].ref.idx).any()
+    assert np.all(np.diff(sim.topology.relations[0].ref.ptr)[failed] == 0)
     assert len(intact) == 2 and len(np.unique(held)) == len(np.unique(pulled)) == 1 and held[0] != pulled[0]
     x = sim.X[:n] + sim.u[:n]
     a, b = x[label == held[0]], x[label == pulled[0]]

@@ -123,7 +123,7 @@ def state_of(sim) -> dict:
                    "surface_torque": readouts.surface_torques(sim).tolist(),
                    "rigid": [body.state() for body in sim.rigid_bodies], **interactions.checkpoint(sim.interactions)},
         "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
-                  "updates": sim.topology.count, "since_update": sim.topology.since, "first_stable": sim.stable.first},
+                  **sim.topology.clock(), "first_stable": sim.stable.first},
     }
 
 
