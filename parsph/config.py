@@ -74,8 +74,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
         **FAILURE_KEYS,  # the failure models' (materials.FAILURES)
         "break_pairs": Key("bool", False, None,
                            "with a failure model: a failed particle (damage 1) loses its pairs, so that cracks "
-                           "open and the failed particles fly free (default: they keep them, as [G §4.6]); "
-                           "total-Lagrangian kernels, no symmetry planes"),
+                           "open and the failed particles fly free (default: they keep them, as [G §4.6])"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS), "; ".join(
@@ -840,11 +839,6 @@ def _check_updated_bodies(bodies_: list) -> None:
                 raise InputError(f"bodies[{i}].formulation.{key} = {other.get(key)!r}: the bodies with an updated "
                                  f"reference update it together and share {key} (bodies[{first}] has "
                                  f"{form.get(key)!r})")
-    for i, b in enumerate(bodies_):
-        if b["material"]["break_pairs"]:
-            raise InputError(f"bodies[{i}].material.break_pairs cannot be used in a scene with a body of "
-                             f"type = 'ulsph' or kernel = 'eulerian' (bodies[{first}]): pairs break in a fixed "
-                             "reference")
 
 
 def moving_formulation(scene: dict) -> dict | None:
@@ -923,11 +917,9 @@ def validate(raw: dict) -> dict:
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
     for body in bodies(scene):
-        mat, form = body["material"], body["formulation"]
-        if mat["break_pairs"] and (not failure_of(mat) or _kept_lists(form) or scene["symmetry"]):
-            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1), a "
-                             "total-Lagrangian kernel (not ulsph, not formulation.kernel = 'eulerian') and no "
-                             "[[symmetry]] planes")
+        mat = body["material"]
+        if mat["break_pairs"] and not failure_of(mat):
+            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1)")
         if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
             del mat["break_pairs"]
     if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):

@@ -19,7 +19,6 @@ from parsph.bc import BoundaryConditions, Tractions
 from parsph.collocation import BoundaryCollocation, collocated
 from parsph.contact import Contact
 from parsph.formulations import FORMULATIONS, reference, tlsph
-from parsph.neighbors import find_pairs
 from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
@@ -89,9 +88,8 @@ def adopt(sim, local: LocalBody) -> None:
         sim.decomp = Decomposition(local, sim.comm, mirrors, layer2=layer2)
         body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
         sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
-        failed = sim.failure.detached is not None and sim.failure.detached[:n].any()
-        searched = find_pairs(fl["X"], fl["support"], local.gid, n) if failed else None
-        cut = sim.failure.crack(searched, fl["X"], fl["measure"], local.gid, n, sim.failure.detached)
+        cut = sim.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, sim.failure.detached,
+                                    len(sim.scene["symmetry"]), local.total)
         sim.ref = reference.build(
             fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, sim.decomp.n_rows,
             sim.scene["kernel"]["type"], body, [b.formulation.pair_options for b in sim.bodies],
