@@ -82,7 +82,7 @@ class Failure:
                   detached, planes: int, total: int) -> np.ndarray | None:
         """The pairs cut at a set-up or a search (collective): those remembered (crack) or
         restored from a checkpoint, else (a first set-up) those the detached particles cut
-        in the reference X."""
+        in the reference `X` the pairs are built in."""
         if detached is None:
             return None
         if self.cut is not None:
@@ -98,7 +98,8 @@ class Failure:
 
     def break_pairs(self, sim) -> None:
         """Particles that have failed since the last call lose their pairs (collective): the
-        reference data is built again without them (materials.damage: cracks open), and
+        reference data is built again without them (materials.damage: cracks open), in the
+        reference it is built in (X, or X^r when updated; on the kept lists if any), and
         again while it leaves a particle with a singular correction matrix (a particle cut
         off from its body: it fails too). The forces are evaluated on the new pairs; the
         change of F this makes does no work (the particles do not move): an elasto-plastic
