@@ -13,6 +13,7 @@ import pytest
 from conftest import RUNS
 from parsph import conditions
 from parsph.diagnostics import global_diagnostics
+from parsph.errors import InputError
 from parsph.formulations import reference
 from parsph.neighbors import pair_keys
 from physics import run_until, simulation
@@ -35,7 +36,7 @@ HALF_STRIP = WHOLE_STRIP.replace("upper = [10.0e-3, 6.0e-3]", "upper = [10.0e-3,
 
 def assert_broken(sim) -> None:
     """Pairs have broken: particles are detached (no pairs, nobody's neighbour) and pairs
-    are cut, of which none is left; and the reference data (the kept lists of an updated
+    are cut, of which none is left, fewer than a search finds; and the reference data (the kept lists of an updated
     reference) holds the pairs and gradients a search in the same reference, filtered the
     same way, gives (reference.build without a skin)."""
     n = sim.n_owned
@@ -49,11 +50,64 @@ def assert_broken(sim) -> None:
     searched = reference.build(X, measure, volume, sim.support, sim.gid, n, sim.decomp.n_rows,
                                sim.scene["kernel"]["type"], sim.body, [b.formulation.pair_options for b in sim.bodies],
                                sim.eta, sim.weighted_hessian, detached=detached, cut=sim.failure.cut)
+    unbroken = reference.build(X, measure, volume, sim.support, sim.gid, n, sim.decomp.n_rows,
+                               sim.scene["kernel"]["type"], sim.body, [b.formulation.pair_options for b in sim.bodies],
+                               sim.eta, sim.weighted_hessian, tolerant=True)
+    assert len(ref.idx) < len(unbroken.idx)  # fewer pairs than the same reference without breaking
     assert ref.kept is not None or not sim.updated
     np.testing.assert_array_equal(ref.ptr, searched.ptr)
     np.testing.assert_array_equal(ref.idx, searched.idx)
     np.testing.assert_allclose(ref.g, searched.g, rtol=0, atol=1e-9 * np.abs(searched.g).max())
     np.testing.assert_allclose(ref.g_rev, searched.g_rev, rtol=0, atol=1e-9 * np.abs(searched.g).max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_kept_lists_and_the_search_leave_out_the_same_broken_pairs(dim):
+    """The two builders of formulations.reference on a disordered block whose last fifth of
+    rows are ghosts, with a tenth of the particles detached, a tenth of the other pairs cut
+    and one owned particle left with a single pair (a singular correction, `tolerant`): the
+    search (numpy) and the kept lists of an updated reference (compiled: filtered at a
+    search, filtered again when more pairs break, and rebuilt on the filtered lists as a
+    reference update does) give the same pairs in the same order, the same gradients and
+    the same singular row."""
+    from parsph.formulations import tlsph
+    from parsph.geometry import box
+
+    spacing = 0.05 if dim == 2 else 0.1
+    X, measure = box([0.0] * dim, [1.0] * dim, spacing)
+    rng = np.random.default_rng(5)
+    X = X + rng.uniform(-0.2, 0.2, X.shape) * spacing
+    gid = rng.permutation(len(X)).astype(np.int64)
+    support = 2.1 * spacing * (1.0 + 0.1 * rng.random(len(X)))
+    n_rows, n = len(X), int(0.8 * len(X))
+    body = np.zeros(len(X), np.int64)
+    options = [reference.PairOptions(corrected=True, hourglass_form=tlsph.HOURGLASS_PAPER, alpha=50.0)]
+    args = (X, measure, measure * 1.1, support, gid, n, n_rows, "cubic_spline", body, options, 0.0, True)
+    whole = reference.build(*args)
+    detached = rng.random(len(X)) < 0.1
+    rows = np.repeat(np.arange(n), np.diff(whole.ptr))
+    keys = pair_keys(gid[rows], gid[whole.idx])
+    lone = int(np.flatnonzero(~detached[:n] & (np.diff(whole.ptr) > 3))[0])
+    alone = keys[whole.ptr[lone] + 1:whole.ptr[lone + 1]]  # all its pairs but its first
+    alone = alone[~np.isin(whole.idx[whole.ptr[lone] + 1:whole.ptr[lone + 1]], np.flatnonzero(detached))]
+    detached[whole.idx[whole.ptr[lone]]] = False
+    cut = np.unique(np.concatenate([rng.choice(keys, len(keys) // 10, replace=False), alone]))
+    searched = reference.build(*args, detached=detached, cut=cut, tolerant=True)
+    at_search = reference.build(*args, skin=0.0, detached=detached, cut=cut, tolerant=True)
+    kept = reference.build(*args, skin=0.0)  # then the pairs break on the kept lists
+    broken = reference.build(*args, kept=kept.kept, detached=detached, cut=cut, tolerant=True)
+    for compiled in (at_search, broken):
+        np.testing.assert_array_equal(searched.ptr, compiled.ptr)
+        np.testing.assert_array_equal(searched.idx, compiled.idx)
+        np.testing.assert_array_equal(searched.bad, compiled.bad)
+        for name in ("g", "g_rev", "g_sum", "hgc"):
+            a, b = getattr(searched, name), getattr(compiled, name)
+            assert np.abs(a - b).max() <= 1e-11 * np.abs(a).max(), name
+    assert lone in searched.bad and len(searched.idx) < len(whole.idx) - len(cut) // 2
+    assert not detached[searched.idx].any()
+    # a reference update on the filtered lists (topology._recommit): the same again, singular row raised
+    with pytest.raises(InputError, match="singular"):
+        reference.build(*args, kept=broken.kept)
 
 
 def test_plate_impact_with_the_target_updated_breaks_its_pairs_and_balances():
