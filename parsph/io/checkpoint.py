@@ -4,8 +4,9 @@ A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the r
 configuration (positions, measures, volumes, masses, kernel supports, group membership),
 the state (displacement, velocity) and, in the updated formulation, the current reference
 (X^r, F^r, V^r); the checkpointed fields of any other point set (stress points) in a group
-of that name, in its global-id order; the pairs cracks have cut (with material.break_pairs); plus the clock (time, step, dt, reference updates), the accumulated
-energies, the output schedules and the resolved scene. It is written by all ranks together
+of that name, in its global-id order; the pairs cracks have cut (material.break_pairs); plus
+the clock (time, step, dt, reference updates), the accumulated energies, the output
+schedules and the resolved scene. It is written by all ranks together
 under a temporary name, made durable (fsync) and renamed, so a checkpoint either exists
 whole or not at all; the last K are kept.
 

@@ -325,8 +325,9 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
         """KeptPairs.rebuild, first pass, row by row: the kept candidates (stored for the
         owned rows) with their kernel values and L_i, its condition number and inverse
         (and D_i, C_i summed over its middle index, As_i). report: (row, neighbour or count
-        of singular rows, condition); `singular`: which rows' L_i is singular. The sums of a row run in scalars: stores to arrays
-        that might alias would keep the compiler from holding them in registers."""
+        of singular rows, condition); `singular`: which rows' L_i is singular. The sums of a
+        row run in scalars: stores to arrays that might alias would keep the compiler from
+        holding them in registers."""
         k = 0
         first_bad, bad = -1, 0
         for i in range(len(cptr) - 1):
