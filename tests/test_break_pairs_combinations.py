@@ -19,8 +19,8 @@ from parsph.neighbors import pair_keys
 from physics import run_until, simulation
 from test_damage import STRIP, same_across_ranks_and_restart
 
-# the plate impact, coarsened (s = 0.5 mm) and to 15 us (perforating), the target updated
-PLATE = ["parameters.spacing=5.0e-4", "time.end=1.5e-5", 'bodies.0.formulation.type="ulsph"',
+# the plate impact, coarsened (s = 0.5 mm) and to 10 us (perforating), the target updated
+PLATE = ["parameters.spacing=5.0e-4", "time.end=1.0e-5", 'bodies.0.formulation.type="ulsph"',
          "bodies.0.formulation.update_every=10", "bodies.0.material.break_pairs=true"]
 BROKEN_STRIP = STRIP.replace("failure_strain = 0.03", "failure_strain = 0.03\nbreak_pairs = true")
 # the strip with the Eulerian kernel (no hourglass control: F explains every separation), to 10 us
@@ -112,13 +112,13 @@ def test_kept_lists_and_the_search_leave_out_the_same_broken_pairs(dim):
 
 
 def test_plate_impact_with_the_target_updated_breaks_its_pairs_and_balances():
-    """The target in ulsph with break_pairs, to 15 us: its reference updated every 10
-    steps, its failed particles detached and the crack's pairs cut (and not restored by the
-    updates), the kept lists the same as a filtered search; the projectile perforates and
-    leaves slower (measured 421 m/s of 600); the energy balance closes to 1e-3 of the impact's
-    kinetic energy (measured 2e-5)."""
+    """The target in ulsph with break_pairs, to 10 us: its reference updated every 10
+    steps, its failed particles detached (measured 59) and the crack's pairs cut (and not
+    restored by the updates), the kept lists the same as a filtered search; the projectile
+    perforates and is slowed (measured to 440 m/s of 600); the energy balance closes to
+    1e-3 of the impact's kinetic energy (measured 4.6e-5)."""
     sim = simulation("plate_impact", PLATE)
-    rows = run_until(sim, 1.5e-5, every=100)
+    rows = run_until(sim, 1.0e-5, every=100)
     assert sim.topology.count >= sim.step_count // 10
     assert_broken(sim)
     assert np.abs(rows["total_energy"] - rows["total_energy"][0]).max() < 1e-3 * rows["kinetic_energy"][0]
