@@ -23,9 +23,9 @@ from test_damage import STRIP, same_across_ranks_and_restart
 PLATE = ["parameters.spacing=5.0e-4", "time.end=1.0e-5", 'bodies.0.formulation.type="ulsph"',
          "bodies.0.formulation.update_every=10", "bodies.0.material.break_pairs=true"]
 BROKEN_STRIP = STRIP.replace("failure_strain = 0.03", "failure_strain = 0.03\nbreak_pairs = true")
-# the strip with the Eulerian kernel (no hourglass control: F explains every separation), to 10 us
+# the strip with the Eulerian kernel (no hourglass control: F explains every separation), to 16 us
 EULERIAN_STRIP = BROKEN_STRIP.replace('hourglass = 50.0\nhourglass_form = "paper"\n', "").replace(
-    'type = "tlsph"', 'type = "sph"\nkernel = "eulerian"').replace("end = 1.3e-5", "end = 1.0e-5")
+    'type = "tlsph"', 'type = "sph"\nkernel = "eulerian"').replace("end = 1.3e-5", "end = 1.6e-5")
 # the strip to 25 us, and its half y < 3 mm (its lattice, of rows at 0.25 mm + k s, mirrored exactly),
 # with a support of 3 spacings: pairs the crack cuts cross the plane
 WHOLE_STRIP = BROKEN_STRIP.replace("end = 1.3e-5", "end = 2.5e-5").replace("support = 2.0", "support = 3.0")
@@ -126,15 +126,15 @@ def test_plate_impact_with_the_target_updated_breaks_its_pairs_and_balances():
 
 
 def test_eulerian_strip_breaks_its_pairs_and_balances_as_without_breaking():
-    """The notched strip in SPH with the Eulerian kernel, pulled to 10 us: its failed
+    """The notched strip in SPH with the Eulerian kernel, pulled to 16 us: its failed
     particles detached and pairs cut at every step's rebuild of the kept lists (the same as
-    a filtered search); the balance as without break_pairs: measured 2.9 % and 3.2 % of the
+    a filtered search); the balance as without break_pairs: measured 3.1 % and 3.3 % of the
     external work, the Eulerian SPH's own (2.5 % without a failure model, as the pull
     ramps up), within the default balance.energy 0.05."""
     worst = {}
     for breaking, text in ((True, EULERIAN_STRIP), (False, EULERIAN_STRIP.replace("break_pairs = true\n", ""))):
         sim = simulation(text)
-        rows = run_until(sim, 1.0e-5, every=10)
+        rows = run_until(sim, 1.6e-5, every=10)
         worst[breaking] = float(np.abs(rows["total_energy"][1:] / rows["external_work"][1:]).max())
         if breaking:
             assert sim.topology.count == sim.step_count
