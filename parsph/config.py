@@ -74,8 +74,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
         **FAILURE_KEYS,  # the failure models' (materials.FAILURES)
         "break_pairs": Key("bool", False, None,
                            "with a failure model: a failed particle (damage 1) loses its pairs, so that cracks "
-                           "open and the failed particles fly free (default: they keep them, as [G §4.6]); "
-                           "total-Lagrangian kernels, no symmetry planes"),
+                           "open and the failed particles fly free (default: they keep them, as [G §4.6])"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS), "; ".join(
@@ -840,11 +839,6 @@ def _check_updated_bodies(bodies_: list) -> None:
         if (other.get("kernel") == "eulerian") != (form.get("kernel") == "eulerian"):
             raise InputError(f"bodies[{i}].formulation: a scene's bodies with an updated reference are all "
                              f"type = 'ulsph' or all kernel = 'eulerian' (bodies[{first}] differs)")
-    for i, b in enumerate(bodies_):
-        if b["material"]["break_pairs"]:
-            raise InputError(f"bodies[{i}].material.break_pairs cannot be used in a scene with a body of "
-                             f"type = 'ulsph' or kernel = 'eulerian' (bodies[{first}]): pairs break in a fixed "
-                             "reference")
 
 
 BODY_KERNEL_KEYS = ("type", "support")  # the keys of [kernel] a body may change
@@ -929,11 +923,9 @@ def validate(raw: dict) -> dict:
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
     for body in bodies(scene):
-        mat, form = body["material"], body["formulation"]
-        if mat["break_pairs"] and (not failure_of(mat) or _kept_lists(form) or scene["symmetry"]):
-            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1), a "
-                             "total-Lagrangian kernel (not ulsph, not formulation.kernel = 'eulerian') and no "
-                             "[[symmetry]] planes")
+        mat = body["material"]
+        if mat["break_pairs"] and not failure_of(mat):
+            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1)")
         if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
             del mat["break_pairs"]
     if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):
@@ -950,7 +942,7 @@ def validate(raw: dict) -> dict:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
     if "ties" in raw:
         entries = [_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))]
-        scene["ties"] = ties.check(entries, scene, bodies(scene), _moves)
+        scene["ties"] = ties.check(entries, scene, bodies(scene), moves)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 

@@ -50,7 +50,7 @@ class Simulation:
         self.offsets = np.asarray(offsets, np.int64)
         self.bodies = [Body(b, spec, int(self.offsets[b]), int(self.offsets[b + 1]), dim)
                        for b, spec in enumerate(specs)]
-        self.failure = Failure(self.bodies, dim, comm)
+        self.failure = Failure(self.bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, self.bodies, local, comm)
         settle(self)
         self.rebalance = scene["parallel"]["rebalance"]

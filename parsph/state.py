@@ -19,7 +19,6 @@ from parsph.bc import BoundaryConditions, Tractions
 from parsph.collocation import BoundaryCollocation, collocated
 from parsph.formulations import FORMULATIONS, tlsph
 from parsph.kernel_relation import Configuration
-from parsph.neighbors import find_pairs
 from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
@@ -92,9 +91,8 @@ def adopt(sim, local: LocalBody) -> None:
         sim.decomp = Decomposition(local, sim.comm, mirrors, layer2=layer2)
         body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
         sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
-        failed = sim.failure.detached is not None and sim.failure.detached[:n].any()
-        searched = find_pairs(fl["X"], fl["support"], local.gid, n) if failed else None
-        cut = sim.failure.crack(searched, fl["X"], fl["measure"], local.gid, n, sim.failure.detached)
+        cut = sim.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, sim.failure.detached,
+                                    len(sim.scene["symmetry"]), local.total)
         sim.topology.build(Configuration(fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, body, n,
                                          sim.decomp.n_rows), detached=sim.failure.detached, cut=cut)
     if layer2:

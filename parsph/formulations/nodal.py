@@ -224,7 +224,8 @@ class NodalFormulation:
                         sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.stable.bound_hourglass, sim.omega_hg2,
                         *force_scratch, sim.v, sim.material_state(body)[1] if viscous else sim.no_state,
                         sim.support, kind, constants)
-        reads = ("VP",) + (("d", "fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \
+        reads = ("VP",) + (("d", "fs" if self.updated else "F", "youngs") if hourglass else ()) + \
+            (("B",) if hessian else ()) + \
             (("v", body.law.state + "_trial") if viscous else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2"), force_row=True))

@@ -79,13 +79,16 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
     failed particles whose pairs are broken, materials.damage) of any, nor the pairs `cut`
     (neighbors.crossing: across a crack). The neighbours are
-    searched for, or, given a `skin` (an updated reference: no pair breaking), built by
-    KeptPairs on lists that much wider, which are kept (`kept`) until a particle has moved
-    half the skin: the same pairs in the same order. `tolerant`: owned rows left
-    with a singular correction matrix are listed in `bad` rather than raised."""
+    searched for, or, given a `skin` (an updated reference), built by KeptPairs on lists
+    that much wider, which are kept (`kept`) until a particle has moved half the skin: the
+    same pairs in the same order. The kept lists are filtered as the search is (KeptPairs
+    keeps its `detached` rows; given `detached`, `kept` is filtered again). `tolerant`:
+    owned rows left with a singular correction matrix are listed in `bad` rather than raised."""
     members = np.array([o is not None for o in options])
     options = [o or NO_PAIRS for o in options]
     corrected = np.array([o.corrected for o in options])
+    breaks = detached is not None and detached.any()
+    cut = np.zeros(0, np.int64) if cut is None else cut
     if skin is not None or kept is not None:
         if kept is None:
             candidates = find_pairs(X, support, gid, n_rows, skin)
@@ -94,14 +97,16 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
             if not members.all():
                 candidates = _rows_of(candidates, members[body[:n_rows]])
             kept = KeptPairs(candidates, X.shape[1], kernel, (eta, weighted_hessian) if eta > 0 else None)
-        return _rebuilt(kept, X, measure, volume, support, gid, n_owned, body, options)
+        if breaks:
+            kept = kept.without(detached, gid, cut)
+        return _rebuilt(kept, X, measure, volume, support, gid, n_owned, body, options, tolerant)
     pairs = find_pairs(X, support, gid, n_rows)
     if len(options) > 1:
         pairs = within_bodies(pairs, body)
     if not members.all():
         pairs = _rows_of(pairs, members[body[:n_rows]])
-    if detached is not None and detached.any():
-        pairs = without(pairs, detached, gid, np.zeros(0, np.int64) if cut is None else cut)
+    if breaks:
+        pairs = without(pairs, detached, gid, cut)
     ref = reference_pairs(X, measure, support, gid, pairs, kernel,
                           None if corrected.all() else corrected[body[:n_rows]],
                           None if detached is None else detached[:n_rows], tolerant)
@@ -156,13 +161,13 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
 
 
 def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np.ndarray,
-             options: list) -> ReferenceData:
+             options: list, tolerant: bool) -> ReferenceData:
     """The reference data of an updated reference from its KeptPairs (views of their arrays,
     rebuilt in place at the next update)."""
     rows = kept.candidates.n_rows
     plain = ~np.array([o.corrected for o in options])[body[:rows]]
     min_spacing, stiffening = np.empty(n), np.ones(n)
-    end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening)
+    end, bad = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening, tolerant)
     dim = X.shape[1]
     ptr, idx, dx, w = kept.ptr[: n + 1], kept.idx[:end], kept.dx[:end], kept.w[:end]
     hgc = hreg = np.zeros(0)
@@ -181,7 +186,7 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
         q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
         q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),
         gh_rev=kept.gh_rev[:end] if stabilised else np.zeros(0), min_spacing=min_spacing, stiffening=stiffening,
-        kept=kept, bad=np.zeros(0, np.int64))
+        kept=kept, bad=bad)
 
 
 def _rows_of(pairs: Relation, rows: np.ndarray) -> Relation:
