@@ -948,7 +948,7 @@ def validate(raw: dict) -> dict:
 
 def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
     """The [[contact]] tables: two distinct bodies of the scene each, every pair once, one
-    radius per body, no symmetry planes."""
+    radius per body."""
     names = [b["name"] for b in bodies(scene)] if "bodies" in scene else []
     out, seen, radius = [], set(), {}
     for i, t in enumerate(_array("contact", raw)):
@@ -977,9 +977,6 @@ def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
                 raise InputError(f"{path}.radius = {item['radius']:g}: body '{name}' has contact radius "
                                  f"{radius[name]:g} in an earlier [[contact]]; give it one radius")
         out.append(item)
-    if out and scene["symmetry"]:
-        raise InputError("[[contact]] with [[symmetry]] planes is not supported: the mirror images do not "
-                         "take part in contact; model both sides")
     return out
 
 

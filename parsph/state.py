@@ -169,7 +169,7 @@ def adopt(sim, local: LocalBody) -> None:
     sim.collocation = BoundaryCollocation(sim) if efg and sim.scene["bc"] else None
     sim.walls.select(sim.groups)
     sim.contact = Contact(sim.scene["contact"], sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, n, dim,
-                           config.thickness(sim.scene), sim.comm) if sim.scene.get("contact") else None
+                           config.thickness(sim.scene), sim.comm, sim.scene["symmetry"]) if sim.scene.get("contact") else None
     sim.omega_c2 = sim.contact.omega2 if sim.contact else np.zeros(0)
     sim.exclude_kernel_pairs()
     for b in sim.bodies:

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from parsph.errors import InputError
-from physics import simulation
+from physics import run_until, simulation
 
 SPACING = 2.5e-4
 
@@ -103,3 +103,50 @@ def test_symmetry_planes_with_hessian_stabilisation_are_refused():
     the quarter with fixed normal components, reach 50 %)."""
     with pytest.raises(InputError, match="not symmetric under reflection"):
         simulation(pressed_block(True, 'type = "tlsph"\nhessian = 0.3'))
+
+
+PLATES_APART = ["bc.1.type=velocity", "bc.1.value=[0.0, 5.0]", "bc.0.value=[0.0, -5.0]"]  # both at 5 m/s
+
+
+def test_quarter_in_contact_with_its_plate_moves_as_the_whole_block_between_two_plates():
+    """runs/punch_hertz_quarter.toml at 5 rows (0.3 mm) against runs/punch_hertz.toml at the
+    same spacing with both plates moving at 5 m/s: the block's and the plate's particles near
+    the planes touch the mirror images of the other body's (contact across the plane x = 3
+    mm) and the quarter's particles move as the whole block's to round-off; the plate's
+    contact force is half the whole model's and the energy balance closes."""
+    quarter = simulation("punch_hertz_quarter", ["parameters.spacing=3e-4", "parameters.rows=5"])
+    whole = simulation("punch_hertz", ["parameters.spacing=3e-4", *PLATES_APART])
+    gap, match = cKDTree(whole.quantity("reference_position")).query(quarter.quantity("reference_position"))
+    assert gap.max() < 1e-15
+    h = run_until(quarter, 1.5e-5, every=100)
+    run_until(whole, 1.5e-5, every=100)
+    scale = np.abs(whole.quantity("displacement")).max()
+    assert scale > 5e-5  # the plates went 0.15 mm deep together
+    assert np.abs(quarter.quantity("displacement") - whole.quantity("displacement", match)).max() < 1e-9 * scale
+    force = quarter.diagnostics()["contact_force_y.block.top"]
+    assert force < -1e4  # the plate presses on the block
+    assert force == pytest.approx(0.5 * whole.diagnostics()["contact_force_y.block.top"], rel=1e-8)
+    assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-4 * h["external_work"][-1]
+
+
+@pytest.mark.mpi
+def test_quarter_in_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
+    """runs/punch_hertz_quarter.toml at 10 rows, 600 steps (the plate presses from the start):
+    the same history and final state bit for bit on 1 and 3 ranks, and a run checkpointed
+    on 2 ranks, restarted on 3, continues exactly; the plate's contact force is not zero."""
+    from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+    from parsph.io import read_history
+
+    scene = RUNS / "punch_hertz_quarter.toml"
+    coarse = ["--set", "parameters.rows=10", "--set", "parameters.spacing=1.5e-4", "--set", "time.max_steps=600",
+              "--set", "output.history_interval=0", "--set", "output.history_every=50"]
+    assert_same_on_ranks(scene, coarse, tmp_path / "quarter")
+    split = tmp_path / "split"
+    proc = parsph(["run", scene, "--out", split, "--quiet", *coarse, "--set", "time.max_steps=300",
+                   "--set", "output.checkpoint_every=300"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    proc = parsph(["run", scene, "--out", split, "--quiet", *coarse, "--restart", "latest"], ranks=3)
+    assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(tmp_path / "quarter" / "ranks_1", split)
+    force = read_history(tmp_path / "quarter" / "ranks_1")["contact_force_y.block.top"]
+    assert force[-1] < -1e4
