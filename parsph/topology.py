@@ -39,7 +39,7 @@ class Topology:
         kept = config.moving_formulation(scene) or config.bodies(scene)[0]["formulation"]
         self.rule = Skin(config.skin(kept) * comm.allreduce(
             float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
-            config.search_every(kept, bool(scene["symmetry"])))
+            config.search_every(kept))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
         self.count = 0  # reference updates so far
         self.since = 0  # steps since the last one
@@ -129,8 +129,7 @@ class Topology:
             points.refresh("Xr", "Fr")
         for name, value in self._new_reference(sim).items():
             getattr(sim, name)[:n] = value
-        sim.decomp.refresh_all(*(sim.particles.arrays[name] for name in fields.migrating(sim.carried)
-                                 if name != "gid"))
+        sim.particles.refresh_all(*(name for name in fields.migrating(sim.carried) if name != "gid"))
         if sim.eulerian and sim.all_move:
             sim.shift[:] = sim.u  # d = 0 exactly (state.reference_shift)
         else:

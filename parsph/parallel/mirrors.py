@@ -33,11 +33,13 @@ from parsph.parallel.decomposition import LocalBody
 
 @dataclass
 class Mirrors:
-    """The layer-1 images of a rank's local arrays and how to refresh them."""
+    """The images of a rank's local arrays and how to refresh them."""
 
     start: int  # local row of the first layer-1 image
     source: np.ndarray  # local row of each layer-1 image's particle
     sign: np.ndarray  # (images, dim): the reflection, +1 or -1 per component
+    offset: np.ndarray  # (images, dim): a point p reflects to sign * p + offset
+    layer2: tuple  # the layer-2 images' (start, source, sign, offset), by local row
 
     def fill(self, arr: np.ndarray, reflected: bool = True) -> None:
         """Set the layer-1 image rows of `arr` (scalars, vectors or tensors per particle)
@@ -47,6 +49,15 @@ class Mirrors:
         value = arr[self.source]
         arr[self.start: self.start + len(self.source)] = \
             value if arr.ndim == 1 or not reflected else reflect(value, self.sign)
+
+    def fill_all(self, arr: np.ndarray, field) -> None:
+        """Set the image rows of both layers of `arr`, the values of the registered `field`
+        (parsph.fields), to their sources' reflected as its kind says (Field.reflect), or
+        copied (`field` None: a material state): the images of a search, between searches."""
+        for start, source, sign, offset in ((self.start, self.source, self.sign, self.offset), self.layer2):
+            if len(source):
+                value = arr[source]
+                arr[start: start + len(source)] = value if field is None else field.reflect(value, sign, offset)
 
 
 def reflect(value: np.ndarray, sign: np.ndarray) -> np.ndarray:
@@ -73,17 +84,20 @@ def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
     return sides
 
 
-def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[LocalBody, Mirrors | None]:
+def add_images(local: LocalBody, position: str, planes: list, comm,
+               skin: float = 0.0) -> tuple[LocalBody, Mirrors | None]:
     """`local` with the mirror images across `planes` (scene["symmetry"]) of its particles
-    in the configuration `fields[position]` added as two layers; and their refresh plan
-    (None without planes)."""
+    in the configuration `fields[position]` added as two layers, with reaches extended by
+    `skin` (lists kept between searches, as the ghosts of add_ghosts); and their refresh
+    plan (None without planes)."""
     if not planes:
         return local, None
     fields, n, n1 = local.fields, local.n_owned, local.n_owned + local.n_ghost
     x = fields[position]
     dim = x.shape[1]
-    reach = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
-    tol = 1e-9 * reach
+    support = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
+    tol = 1e-9 * support
+    reach = support + skin
     sides = body_sides(x[:n], planes, tol, comm)
     plane_at = np.zeros(dim)  # a point on every plane
     for p in planes:
@@ -131,4 +145,6 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
     owner = np.concatenate([local.owner[:n1], none, local.owner[n1:], np.full(len(layer2), -1, np.int64)])
     body = LocalBody(gid=merged["gid"], owner=owner, n_owned=n, n_ghost=local.n_ghost + len(layer1),
                      total=local.total, fields=merged)
-    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]))
+    source2 = source[layer2] + np.where(source[layer2] >= n1, len(layer1), 0)  # rows after the layer-1 images
+    second_plan = (len(merged["gid"]) - len(layer2), source2, sign[layer2], offset[layer2])
+    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), offset[layer1], second_plan)
