@@ -14,7 +14,14 @@ particle (owned or a layer-1 ghost) after each ghost exchange; layer-2 images co
 the layer-2 ghosts and only serve to build the layer-1 rows. An image's global id is its
 source's plus a multiple of the particle count, so sums over rows keep an order that does
 not depend on the rank count. A particle on a plane (within 1e-9 supports) has no image:
-hold its normal component with a fixed condition.
+hold its normal component with a fixed condition (its whole mass and energy then count in
+the part modelled, which holds half of it: the energy balance is off by that share).
+
+Neighbour lists kept between searches (ulsph, the Eulerian kernel: relations.Skin) get
+images within the reaches plus the skin, as their ghosts do, and between searches every
+image row of both layers is set from its source again (Mirrors.fill_all): the rows a
+search would make. Contact makes its own images of the contact particles near a plane
+(parsph.contact), with the same global ids.
 """
 
 from __future__ import annotations
