@@ -112,16 +112,16 @@ PLATES_APART = ["bc.1.type=velocity", "bc.1.value=[0.0, 5.0]", "bc.0.value=[0.0,
 
 
 def test_quarter_in_contact_with_its_plate_moves_as_the_whole_block_between_two_plates():
-    """runs/punch_hertz_quarter.toml at 5 rows (0.3 mm) against runs/punch_hertz.toml at the
-    same spacing with both plates moving at 5 m/s: the block's and the plate's particles near
-    the planes touch the mirror images of the other body's (contact across the plane x = 3
-    mm) and the quarter's particles move as the whole block's to round-off; the plate's
-    contact force is half the whole model's and the energy balance closes."""
-    quarter = simulation("punch_hertz_quarter", ["parameters.spacing=3e-4", "parameters.rows=5"])
-    whole = simulation("punch_hertz", ["parameters.spacing=3e-4", *PLATES_APART])
+    """runs/punch_hertz_quarter.toml against runs/punch_hertz.toml with both plates moving at
+    5 m/s, at 15 rows (0.2 mm): the block's and the plate's particles near the plane x = 3 mm
+    touch the mirror images of the other body's, and the quarter's particles (its middle row
+    on the plane y = 1.5 mm, held vertically) move as the whole block's to round-off; the
+    plate's contact force is half the whole model's."""
+    quarter = simulation("punch_hertz_quarter", ["parameters.spacing=2e-4"])
+    whole = simulation("punch_hertz", ["parameters.spacing=2e-4", *PLATES_APART])
     gap, match = cKDTree(whole.quantity("reference_position")).query(quarter.quantity("reference_position"))
     assert gap.max() < 1e-15
-    h = run_until(quarter, 1.5e-5, every=100)
+    run_until(quarter, 1.5e-5, every=100)
     run_until(whole, 1.5e-5, every=100)
     scale = np.abs(whole.quantity("displacement")).max()
     assert scale > 5e-5  # the plates went 0.15 mm deep together
@@ -129,19 +129,18 @@ def test_quarter_in_contact_with_its_plate_moves_as_the_whole_block_between_two_
     force = quarter.diagnostics()["contact_force_y.block.top"]
     assert force < -1e4  # the plate presses on the block
     assert force == pytest.approx(0.5 * whole.diagnostics()["contact_force_y.block.top"], rel=1e-8)
-    assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-4 * h["external_work"][-1]
 
 
 @pytest.mark.mpi
 def test_quarter_in_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
-    """runs/punch_hertz_quarter.toml at 10 rows, 600 steps (the plate presses from the start):
+    """runs/punch_hertz_quarter.toml at 0.12 mm, 600 steps (the plate presses from the start):
     the same history and final state bit for bit on 1 and 3 ranks, and a run checkpointed
     on 2 ranks, restarted on 3, continues exactly; the plate's contact force is not zero."""
     from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
     from parsph.io import read_history
 
     scene = RUNS / "punch_hertz_quarter.toml"
-    coarse = ["--set", "parameters.rows=10", "--set", "parameters.spacing=1.5e-4", "--set", "time.max_steps=600",
+    coarse = ["--set", "parameters.spacing=1.2e-4", "--set", "time.max_steps=600",
               "--set", "output.history_interval=0", "--set", "output.history_every=50"]
     assert_same_on_ranks(scene, coarse, tmp_path / "quarter")
     split = tmp_path / "split"
