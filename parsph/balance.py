@@ -1,7 +1,8 @@
 """The terms of the energy balance, declared once: each term's key (what the ledger sums
 for it: parsph.ledger), its history column (J), its sign in the total energy and whether a
 scene has it. The balance: kinetic + strain + plastic + damage + viscous + hourglass +
-contact + contact work + damping work - external work is constant.
+damping work - external work + the interactions' terms (parsph.interactions: contact,
+contact work, tie energy, released and work) is constant.
 """
 
 from __future__ import annotations
@@ -31,7 +32,5 @@ TERMS = (
     Term("viscous", "viscous_work"),
     Term("hourglass", "hourglass_energy"),
     Term("external", "external_work", -1.0),
-    Term("contact", "contact_energy", present=lambda sim: sim.contact is not None),
-    Term("contact_work", "contact_work", present=lambda sim: sim.contact is not None and sim.contact.dissipative),
     Term("damping", "damping_work", present=lambda sim: sim.damping > 0),
 )

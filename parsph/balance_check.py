@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from parsph.balance import TERMS
+from parsph.interactions import TERMS
 from parsph.errors import ParsphError
 
 DEFAULT_ENERGY = 0.05  # balance.energy where the formulations conserve energy

@@ -21,7 +21,7 @@ import sys
 import tomllib
 from typing import Any
 
-from parsph import expressions, quantities, surfaces
+from parsph import expressions, quantities, surfaces, ties
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, greater_than, in_range, non_negative, one_of, positive
 from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
@@ -351,7 +351,8 @@ GROUP_KEYS = {  # what a [groups.NAME] table's selectors take (geometry.groups.s
     "invert": Key("bool", False, doc="take the particles the selector does not"),
 }
 TOP_LEVEL = tuple(SECTIONS) + ("parameters", "groups", "bc", "tractions", "walls", "tools", "surfaces",
-                               "symmetry", "initial", "probes", "bodies", "contact")
+                               "symmetry", "initial", "probes", "bodies", "contact", "ties")
+TIE_KEYS = ties.TIE_KEYS
 
 
 def _suggest(name: str, known) -> str:
@@ -939,6 +940,9 @@ def validate(raw: dict) -> dict:
         FORMULATIONS[body["formulation"]["type"]].check_body(body, f"bodies[{b}]" if multi else "geometry", scene)
     if "contact" in raw:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
+    if "ties" in raw:
+        entries = [_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))]
+        scene["ties"] = ties.check(entries, scene, bodies(scene), _moves)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 

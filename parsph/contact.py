@@ -88,6 +88,14 @@ def damping_ratio(restitution: float) -> float:
 class Contact:
     """The scene's contact pairs of bodies, on this rank's particles."""
 
+    name, reads, work = "contact", (), "contact_work"  # parsph.interactions: its own halo
+
+    def checkpoint(self) -> dict:  # parsph.interactions: the lists are found again on restart
+        return {}
+
+    def restore(self, totals: dict) -> None:
+        pass
+
     def __init__(self, specs: list, bodies: list, body: np.ndarray, measure: np.ndarray, mass: np.ndarray,
                  gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm, planes: list = ()):
         """specs: the scene's [[contact]] tables; bodies: the simulation's bodies (names,
@@ -186,8 +194,17 @@ class Contact:
         raise error
 
     def check_apart(self, gid: np.ndarray, body: np.ndarray, x: np.ndarray, names: list) -> None:
-        """At the start: refuse bodies in contact that overlap (two particles closer than 0.99
-        of their contact distance), naming both and the closest pair (collective)."""
+        """At the start, before any force: refuse bodies in contact that overlap (two particles
+        closer than 0.99 of their contact distance, coincident ones too), naming both and the
+        closest pair (collective). The lists it searches are searched again at the first
+        evaluation, as without the check."""
+        self.search(x)
+        rows = np.repeat(np.arange(self.n), np.diff(self.ptr))
+        sep = self.x[self.idx] - self.x[rows]
+        ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (self.radius_all[rows] + self.radius_all[self.idx])
+        self.closest[:] = 1.0
+        np.minimum.at(self.closest, rows, ratio)
+        self.rule.forget()
         found = self._closest(gid, body, x, 0.99)
         if found is None:
             return
@@ -196,8 +213,9 @@ class Contact:
         error = InputError(
             f"bodies '{names[first_body]}' and '{names[other_body]}' overlap at the start: particle {first} of "
             f"'{names[first_body]}' at ({where}) is at {ratio:.3g} of the contact distance from particle {other} of "
-            f"'{names[other_body]}' (the contact distance is contact.radius times the spacing); move the bodies "
-            f"apart by at least {(1.0 - ratio) * 100:.3g} % of it, or lower contact.radius")
+            f"'{names[other_body]}' (the contact distance is contact.radius times the spacing); " +
+            ("the bodies interpenetrate: place them apart" if ratio < 0.5 else
+             f"move the bodies apart by at least {(1.0 - ratio) * 100:.3g} % of it, or lower contact.radius"))
         error.agreed = True
         raise error
 

@@ -23,10 +23,10 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph import readouts
+from parsph import interactions, readouts
 from parsph.exact_sum import SCALE, Exact, totals
 from parsph.fields import MOMENT_COMPONENTS
-from parsph.balance import TERMS
+from parsph.interactions import TERMS
 from parsph.rigid import moments
 
 
@@ -325,6 +325,7 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
     walls = reduction.add_sums(sim.walls.contacts)  # obstacle-major, then component
     torques = reduction.add_sums(sim.walls.torques)  # surface-major, then component
     contact = contact_parts(sim, reduction)
+    others = interactions.columns(sim, reduction)
     rigid = rigid_parts(sim, reduction)
     probes = probe_parts(sim.scene["probes"], sim, reduction)
     reduction.reduce()
@@ -339,6 +340,8 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
         for a, name in enumerate(axes):
             out[f"{sim.walls.names[k]}_torque_{name}"] = float(reduction.sums[torques + j * len(axes) + a])
     out.update(contact())
+    for values in others:
+        out.update(values())
     out.update(rigid())
     out.update(probes())
     return out

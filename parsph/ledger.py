@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsph import conditions
-from parsph.balance import TERMS
+from parsph import conditions, interactions
+from parsph.interactions import TERMS
 from numba import njit
 
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
@@ -27,11 +27,10 @@ from parsph.materials import damage
 
 RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
            "viscous_work",  # absorbed by the artificial viscosity
-           "contact_work",  # absorbed by contact damping and friction
            "damping_work",  # taken by the mass-proportional damping (time.damping)
            "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
            "damage_released",  # strain energy and plastic work broken pairs release from intact particles
-           "external_work")
+           "external_work") + interactions.RUNNING  # contact's and the ties' works, the ties' released energy
 
 
 register(Field("viscous_heat", "scalar", owner="viscosity",
@@ -121,10 +120,10 @@ class Ledger:
     def begin(self, sim) -> None:
         """Keep what the step's works need from its start (after the commit, before the kick)."""
         n = sim.n_owned
-        dissipating = sim.contact is not None and sim.contact.dissipative
         self._start = dict(u=sim.u[:n].copy(), v=sim.v[:n].copy() if sim.bcs.moving or sim.collocation else None,
                            f_hg=sim.f_hg.copy(), f_visc=sim.f_visc.copy(), force=sim.force,
-                           f_cd=sim.contact.dissipation.copy() if dissipating else None, external=self.external,
+                           dissipation={i.name: i.dissipation.copy() for i in sim.interactions if i.dissipative},
+                           external=self.external,
                            obstacles=None, internal=sim.internal_force, heating=sim.viscous_heating.copy())
 
     def in_flight(self, sim) -> dict:
@@ -139,7 +138,9 @@ class Ledger:
         for key, value in self._start.items():
             if key == "obstacles" and value is not None:
                 out.update({f"ledger.obstacles.{k}": part for k, part in enumerate(value)})
-            elif key in per_particle or (key in ("v", "f_cd") and value is not None):
+            elif key == "dissipation":
+                out.update({f"ledger.dissipation.{name}": part for name, part in value.items()})
+            elif key in per_particle or (key == "v" and value is not None):
                 out[f"ledger.{key}"] = value
         return out
 
@@ -152,6 +153,8 @@ class Ledger:
             key, values = name[len("ledger."):], fields.pop(name)[:n]
             if key.startswith("obstacles."):
                 parts[int(key.split(".")[1])] = values
+            elif key.startswith("dissipation."):
+                self._start["dissipation"][key.split(".", 1)[1]] = values
             else:
                 self._start[key] = values
         if parts:
@@ -177,8 +180,10 @@ class Ledger:
         if sim.viscous:
             self.add("viscous_work", -0.5 * (start["f_visc"] + sim.f_visc) * du)
             sim.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + sim.viscous_heating)
-        if start["f_cd"] is not None:
-            self.add("contact_work", -0.5 * (start["f_cd"] + sim.contact.dissipation) * du)
+        for interaction in sim.interactions:  # contact damping's and friction's, the ties' dashpots'
+            if interaction.name in start["dissipation"]:
+                self.add(interaction.work, -0.5 * (start["dissipation"][interaction.name] + interaction.dissipation)
+                         * du)
         self.external = conditions.external_force(sim)
         work = 0.5 * (start["external"] + self.external) * du
         if start["obstacles"] is not None:
@@ -211,8 +216,9 @@ class Ledger:
         and plastic work, V^0 (W - psi - w_p): materials.damage, and what broken pairs
         released from the intact ones), viscous work, hourglass (the
         particles' penalty, the work absorbed on this rank by the paper form, the penalty
-        released since), contact (each particle's half of its pairs' potential:
-        parsph.contact), contact work and external work."""
+        released since), damping work, external work and the interactions' terms
+        (interactions.energies: contact's, each particle's half of its pairs' potential, its
+        work; the ties')."""
         out = {term.key: [] for term in TERMS}
         for b in sim.bodies:
             lo, hi = b.lo, b.hi
@@ -224,10 +230,10 @@ class Ledger:
                                                            acc["damage_released"]])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([sim.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
-            out["contact"].append([sim.contact.energy[lo:hi]] if sim.contact else [])
-            out["contact_work"].append([acc["contact_work"]] if sim.contact and sim.contact.dissipative else [])
             out["damping"].append([acc["damping_work"]])
             out["external"].append([acc["external_work"]])
+            for key, parts in interactions.energies(sim, b).items():
+                out[key].append(parts)
         return out
 
     def local(self, sim, key: str) -> float:

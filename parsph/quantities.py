@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from parsph import fields
-from parsph.balance import TERMS
+from parsph.interactions import TERMS
 
 
 @dataclass(frozen=True)
@@ -122,6 +122,7 @@ HISTORY = {
 HISTORY_PATTERNS = ((r"momentum_(defect_)?[xyz]", "kg m/s"), (r"angular_momentum_(defect_)?[xyz]", "kg m^2/s"),
                     (r"(wall|tool|surface)[0-9]+_force_[xyz]", "N"),
                     (r"surface[0-9]+_torque_[xyz]", "N m"), (r"contact_force_[xyz]\..*", "N"),
+                    (r"tie_force_[xyz]\..*", "N"), (r"ties_broken\..*", "1"),
                     (r"rigid_force_[xyz]\..*", "N"), (r"rigid_torque(_[xyz])?\..*", "N m"))
 
 

@@ -84,18 +84,6 @@ def cauchy_stress(sim, sel: np.ndarray, full: bool = False) -> np.ndarray:
     return np.einsum("nab,ncb->nac", P, F) / sim.J[sel, None, None]
 
 
-def law_readout(sim, sel: np.ndarray, name: str) -> np.ndarray:
-    """The material laws' read-out `name` (materials.law.Readout) of their last stress
-    evaluation's state at the owned particles `sel` (0 for the laws without it)."""
-    out = np.zeros(len(sel))
-    for b in sim.bodies:
-        readout = b.law.readouts.get(name)
-        if readout is not None:
-            rows = np.flatnonzero(sim.body[sel] == b.index)
-            out[rows] = readout.compute(b.constants.values, sim.material_state(b)[1][sel[rows]])
-    return out
-
-
 def von_mises(sim, sel: np.ndarray) -> np.ndarray:
     """sqrt(3/2 s:s) of the full Cauchy stress (out-of-plane components included)."""
     s = cauchy_stress(sim, sel, full=True)

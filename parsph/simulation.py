@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from parsph import config, readouts
+from parsph import config, interactions, readouts
 from parsph.bc import apply_initial_conditions
 from parsph.conditions import (external_force, free_rigid_bodies, prescribe_displacement,
                                prescribe_velocity)
@@ -81,12 +81,14 @@ class Simulation:
             self.t, self.step_count = clock["t"], clock["step"]
             self.step_dt = clock.get("step_dt", 0.0)
             self.topology.restore(clock)
+            for interaction in self.interactions:
+                interaction.restore(carried)
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"], carried.get("surface_torque", ()))
-        self.compute_forces()
         if self.contact is not None and restart is None:
-            self.contact.check_apart(self.gid, self.body, self.X + self.u, [b.name for b in self.bodies])
+            self.contact.check_apart(self.gid, self.body, self.X[:n] + self.u[:n], [b.name for b in self.bodies])
+        self.compute_forces()
         self.ledger.external = external_force(self)  # at the current state, for the work integral
         self.stable.start(self, restart["clock"] if restart else None)
 
@@ -159,15 +161,21 @@ class Simulation:
         internal = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
         if self.viscous:
             internal += self.f_visc
-        if self.contact:
+        for interaction in self.interactions:  # parsph.interactions
             t0 = clock()
+            reads = [name for name in interaction.reads if name in stale]
+            if reads:
+                refresh(self, reads)
+                stale.difference_update(reads)
             try:
-                self.contact.evaluate(self.X[:n] + self.u[:n], self.v[:n], self.step_limit)
+                interaction.evaluate(self.X[:n] + self.u[:n], self.v[:n], self.step_limit)
             except ArithmeticError:
-                raise ParsphError(f"contact failed at step {self.step_count + 1}, t = {self.t:.6g}: particles of "
-                                  f"two bodies coincide; the run is unstable: {self.stable.advice()}") from None
-            internal += self.contact.force
-            seconds["contact"] += clock() - t0
+                raise ParsphError(f"{interaction.name} failed at step {self.step_count + 1}, t = {self.t:.6g}: "
+                                  f"particles of two bodies coincide; the run is unstable: "
+                                  f"{self.stable.advice()}") from None
+            internal += interaction.force
+            seconds[interaction.name] += clock() - t0
+        interactions.add_frequencies(self.interactions, self.omega_c2)
         if self.walls.turning:
             self.walls.limit_steps(self.X[:n] + self.u[:n], self.v[:n], self.t, self.step_limit)
         self.internal_force = internal  # the forces between particles (ledger: their impulses)

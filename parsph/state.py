@@ -14,10 +14,9 @@ import collections
 
 import numpy as np
 
-from parsph import config, fields, materials
+from parsph import config, fields, interactions, materials
 from parsph.bc import BoundaryConditions, Tractions
 from parsph.collocation import BoundaryCollocation, collocated
-from parsph.contact import Contact
 from parsph.formulations import FORMULATIONS, reference, tlsph
 from parsph.neighbors import find_pairs
 from parsph.parallel.decomposition import Decomposition, LocalBody
@@ -169,9 +168,10 @@ def adopt(sim, local: LocalBody) -> None:
     efg = any(collocated(b.formulation) for b in sim.bodies)
     sim.collocation = BoundaryCollocation(sim) if efg and sim.scene["bc"] else None
     sim.walls.select(sim.groups)
-    sim.contact = Contact(sim.scene["contact"], sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, n, dim,
-                           config.thickness(sim.scene), sim.comm, sim.scene["symmetry"]) if sim.scene.get("contact") else None
-    sim.omega_c2 = sim.contact.omega2 if sim.contact else np.zeros(0)
+    sim.interaction = interactions.build(sim)  # by kind: parsph.interactions
+    sim.interactions = [i for i in sim.interaction.values() if i is not None]  # summed in this order
+    sim.contact, sim.ties = sim.interaction["contact"], sim.interaction["ties"]
+    sim.omega_c2 = interactions.frequency_bound(sim.interactions, n)
     sim.exclude_kernel_pairs()
     for b in sim.bodies:
         b.stages = [] if b.rigid else b.formulation.stages(sim, b)

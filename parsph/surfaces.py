@@ -63,7 +63,7 @@ def read(path: str, where: str, dim: int) -> tuple:
     except InputError:
         raise
     except Exception as exc:  # noqa: BLE001 - any reader's failure is the file's problem
-        raise InputError(f"{where} = '{path}': cannot be read as a {'triangle surface' if dim == 3 else 'outline'} "
+        raise InputError(f"{where} = '{path}': cannot be read as {'a triangle surface' if dim == 3 else 'an outline'} "
                          f"({type(exc).__name__}: {exc})") from None
     if F.ndim != 2 or not len(F) or V.shape[1:] != (dim,) or not np.isfinite(V).all():
         raise InputError(f"{where} = '{path}': not a surface: no {'triangles' if dim == 3 else 'segments'} "

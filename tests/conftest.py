@@ -147,9 +147,10 @@ def run_parsph():
     return parsph
 
 
-def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> None:
+def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> list:
     """Run `parsph run SCENE ARGS` on each rank count (outputs under out_dir) and assert that
-    tools/compare_outputs.py finds every history series and the final state identical."""
+    tools/compare_outputs.py finds every history series and the final state identical;
+    returns the output directories."""
     outs = []
     for n in ranks:
         out = Path(out_dir) / f"ranks_{n}"
@@ -157,6 +158,27 @@ def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> None:
         assert proc.returncode == 0, proc.stderr
         outs.append(out)
     assert_identical_outputs(*outs)
+    return outs
+
+
+def assert_it_happened(out, ranks: int = 1) -> None:
+    """The guard of a comparison of runs: the run in `out` took steps and moved its particles
+    (kinetic energy in its history, a displacement in its last snapshot where written) and,
+    run on `ranks` ranks, every rank owned particles (the snapshots' owner ranks, where
+    written)."""
+    import h5py
+    import numpy as np
+
+    with h5py.File(Path(out) / "history.h5", "r") as h:
+        assert h["step"][-1] > 0 and h["kinetic_energy"][()].max() > 0.0, f"{out}: nothing moved"
+    with h5py.File(Path(out) / "snapshots.h5", "r") as f:
+        steps = [k for k in f if k.startswith("step_")]
+        last = f[max(steps, key=lambda k: int(k[5:]))]
+        if "displacement" in last:
+            assert np.abs(last["displacement"][()]).max() > 0.0, f"{out}: nothing moved"
+        if "rank" in last and ranks > 1:
+            owners = set(np.unique(np.concatenate([f[k]["rank"][()] for k in steps])).tolist())
+            assert owners == set(range(ranks)), f"{out}: particles only on ranks {sorted(owners)}"
 
 
 def assert_identical_outputs(*outs) -> None:

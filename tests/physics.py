@@ -54,6 +54,20 @@ def elastic_constants(model: str) -> str:
         model, "youngs_modulus = 1.0e6\npoisson_ratio = 0.3")
 
 
+def soft_solid(support: float) -> str:
+    """The kernel and material tables of a soft elastic solid (scene text): Wendland C2 with
+    `support`, Saint Venant-Kirchhoff, 1000 kg/m^3, E = 1 MPa, nu = 0.3."""
+    return f"""[kernel]
+type = "wendland_c2"
+support = {support}
+[material]
+model = "saint_venant_kirchhoff"
+density = 1000.0
+youngs_modulus = 1.0e6
+poisson_ratio = 0.3
+"""
+
+
 def block_2d(model="saint_venant_kirchhoff", hourglass=0.0, form="variational", extra=""):
     """A small free 2D block scene (text), 10 x 6 particles."""
     elastic = elastic_constants(model)

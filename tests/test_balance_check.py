@@ -173,14 +173,17 @@ def test_bodies_passing_through_each_other_stop_the_run_naming_both(tmp_path, ra
 
 
 @pytest.mark.parametrize("ranks", RANKS)
-def test_overlapping_bodies_are_refused_at_the_start(tmp_path, ranks):
-    """The blocks with their particles 0.3 of the contact distance apart: refused (exit 2)
-    naming both bodies and the closest pair, on every rank alike."""
+@pytest.mark.parametrize("gap, says", [(-1.4e-3, "at 0.4 of the contact"), (-5e-3, "the bodies interpenetrate")],
+                         ids=["touching", "inside"])
+def test_overlapping_bodies_are_refused_at_the_start(tmp_path, ranks, gap, says):
+    """The blocks with their particles 0.4 of the contact distance apart, or half inside each
+    other with particles coinciding (where the first contact force would divide by zero):
+    refused (exit 2) naming both bodies and the closest pair, on every rank alike."""
     path = tmp_path / "blocks.toml"
-    path.write_text(BLOCKS.replace("gap = 1.0e-3", "gap = -1.4e-3"))
+    path.write_text(BLOCKS.replace("gap = 1.0e-3", f"gap = {gap!r}"))
     proc = parsph(["run", path, "--out", tmp_path / "out", "--quiet"], ranks=ranks)
     assert proc.returncode == 2, proc.stderr
-    assert "bodies 'left' and 'right' overlap at the start" in proc.stderr and "at 0.4 of the contact" in proc.stderr
+    assert "bodies 'left' and 'right' overlap at the start" in proc.stderr and says in proc.stderr
     assert proc.stderr.count("parsph: error") == 1
 
 

@@ -9,7 +9,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from conftest import RUNS, assert_same_on_ranks
+from conftest import RUNS, assert_it_happened, assert_same_on_ranks
 from parsph import config
 from parsph.build import build_local
 from parsph.errors import InputError
@@ -145,5 +145,6 @@ def test_bad_bodies_are_refused_naming_the_key(change, message):
 def test_two_bodies_on_one_and_two_ranks_bit_for_bit(rubber, tmp_path):
     """Also with the second body's Gauss points (EFG with cells), which a rank holding none
     of them must handle."""
-    assert_same_on_ranks(RUNS / "two_blocks.toml", ["--set", "time.max_steps=100", *rubber], tmp_path,
-                         ranks=(1, 2))
+    outs = assert_same_on_ranks(RUNS / "two_blocks.toml", ["--set", "time.max_steps=100", *rubber], tmp_path,
+                                ranks=(1, 2))
+    assert_it_happened(outs[-1], ranks=2)

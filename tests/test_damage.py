@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import assert_identical_outputs, parsph
+from conftest import assert_identical_outputs, assert_it_happened, parsph
 from parsph import conditions
 from parsph.diagnostics import global_diagnostics
 from parsph.materials import damage
@@ -247,13 +247,18 @@ def same_across_ranks_and_restart(path, tmp_path):
     proc = parsph(["run", path, "--out", one, "--quiet"])
     assert proc.returncode == 0, proc.stderr
     with h5py.File(one / "history.h5", "r") as f:
-        steps = f["step"][()].astype(int)
-    stop = steps[np.argmin(np.abs(steps - 0.75 * steps[-1]))]  # a row: the stopped run writes one there
+        steps, work = f["step"][()].astype(int), f["damage_work"][()]
+    at = np.argmin(np.abs(steps - 0.75 * steps[-1]))
+    stop = steps[at]  # a row: the stopped run writes one there
+    assert 0.0 < work[at] < work[-1], "the strip must be cracking at the restart and go on after it"
     stopped = ["--set", f"time.max_steps={stop}", "--set", f"output.checkpoint_every={stop}"]
     for out, ranks, extra in ((split, 2, stopped), (split, 3, ["--restart", "latest"])):
         proc = parsph(["run", path, "--out", out, "--quiet", *extra], ranks=ranks)
         assert proc.returncode == 0, proc.stderr
     assert_identical_outputs(one, split)
+    assert_it_happened(one)
+    with h5py.File(one / "snapshots.h5", "r") as f:
+        assert f[max((k for k in f if k.startswith("step_")), key=lambda k: int(k[5:]))]["damage"][()].max() == 1.0
 
 
 @pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])

@@ -22,6 +22,7 @@ from parsph.errors import InputError
 from parsph.geometry import lattice
 from parsph.geometry.mesh_parts import MeshPart
 from parsph.io import read_history, read_snapshots
+from physics import soft_solid
 
 # (VTK / meshio node order) each element type as tetrahedra of its nodes, for exact moments
 TETS = {"tetra": [[0, 1, 2, 3]], "pyramid": [[0, 1, 2, 4], [0, 2, 3, 4]],
@@ -189,15 +190,7 @@ dimension = 3
 shape = "mesh"
 file = "{file}"
 {extra}
-[kernel]
-type = "wendland_c2"
-support = 2.0
-[material]
-model = "saint_venant_kirchhoff"
-density = 1000.0
-youngs_modulus = 1.0e6
-poisson_ratio = 0.3
-[formulation]
+""" + soft_solid(2.0) + """[formulation]
 type = "tlsph"
 [time]
 end = 1.0

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT, assert_same_on_ranks
+from conftest import ROOT, assert_it_happened, assert_same_on_ranks
 from parsph.analytic import bar_tip_displacement
 from physics import block_2d, run_until, simulation
 
@@ -360,7 +360,8 @@ def test_sph_and_rlm_same_answer_on_1_and_3_ranks(tmp_path):
     scene = tmp_path / "plate.toml"
     scene.write_text(PLATE)
     for ftype in ("sph", "rlm"):
-        assert_same_on_ranks(scene, ["--set", f'formulation.type="{ftype}"', "--debug"], tmp_path / ftype)
+        outs = assert_same_on_ranks(scene, ["--set", f'formulation.type="{ftype}"', "--debug"], tmp_path / ftype)
+        assert_it_happened(outs[-1], ranks=3)
 
 
 @pytest.mark.parametrize("ftype", ["sph", "rlm"])

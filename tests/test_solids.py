@@ -18,6 +18,7 @@ import pytest
 from parsph import config
 from parsph.errors import InputError
 from parsph.geometry import fill
+from physics import soft_solid
 
 TOL_CENTROID = 0.5  # centroid error < TOL_CENTROID h
 TOL_MOMENTS = 1.0  # second moments' error < TOL_MOMENTS (h / L) |M|
@@ -371,15 +372,7 @@ dimension = 3
 shape = "surface"
 file = "ico.stl"
 spacing = 0.25
-[kernel]
-type = "wendland_c2"
-support = 2.0
-[material]
-model = "saint_venant_kirchhoff"
-density = 1000.0
-youngs_modulus = 1.0e6
-poisson_ratio = 0.3
-[formulation]
+""" + soft_solid(2.0) + """[formulation]
 type = "tlsph"
 [time]
 end = 1.0

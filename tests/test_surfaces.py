@@ -16,7 +16,7 @@ import trimesh
 
 from parsph import preview
 from parsph.io import read_history
-from physics import run_until, simulation
+from physics import run_until, simulation, soft_solid
 
 from conftest import ROOT, RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
 
@@ -32,15 +32,7 @@ shape = "box"
 lower = [0.0, 0.0, 0.0]
 upper = [0.4, 0.4, 0.3]
 spacing = 0.1
-[kernel]
-type = "wendland_c2"
-support = 2.2
-[material]
-model = "saint_venant_kirchhoff"
-density = 1000.0
-youngs_modulus = 1.0e6
-poisson_ratio = 0.3
-[formulation]
+""" + soft_solid(2.2) + """[formulation]
 hourglass = 20.0
 [time]
 end = 1.0
@@ -163,15 +155,7 @@ shape = "box"
 lower = [0.0, 0.0]
 upper = [1.0, 0.6]
 spacing = 0.1
-[kernel]
-type = "wendland_c2"
-support = 2.2
-[material]
-model = "saint_venant_kirchhoff"
-density = 1000.0
-youngs_modulus = 1.0e6
-poisson_ratio = 0.3
-[formulation]
+""" + soft_solid(2.2) + """[formulation]
 hourglass = 20.0
 [time]
 end = 1.0

@@ -58,7 +58,7 @@ from numba import njit
 from parsph import COMPILED_SOURCE
 from parsph.formulations.base import CompiledOnce
 from parsph.kernels.functions import value_and_slope
-from parsph.materials import damage, johnson_cook_failure, update
+from parsph.materials import update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
 
@@ -327,17 +327,7 @@ def stress_at(dim, law, reference, failure, i, fs, Fr, w, c, state, trial, damag
                 for k in range(dim):
                     s += fs[i, a, k] * Fr[i, k, b]
                 F[i, a, b] = s
-    broken = False
-    if failure:
-        broken = damaged[i, damage.DAMAGE] >= 1.0
-    if broken:  # failed: no stress, the law is not evaluated
-        e = damage.failed(F[i], dim, damaged, damaged_trial, i, P)
-    else:
-        e = update.update(law, F[i], dim, c, state, trial, i, P, work, dt)
-        if failure == damage.TENSILE:
-            damage.degrade(P, F[i], dim, damaged, damaged_trial, i, work)
-        elif failure == johnson_cook_failure.JOHNSON_COOK_FAILURE:
-            johnson_cook_failure.accumulate(P, F[i], dim, c, state, trial, damaged, damaged_trial, i, work, dt)
+    e = update.update_failing(law, failure, F[i], dim, c, state, trial, damaged, damaged_trial, i, P, work, dt)
     J[i] = det(F[i], dim)
     psi[i] = e
     for a in range(dim):
@@ -354,7 +344,7 @@ def stress_at(dim, law, reference, failure, i, fs, Fr, w, c, state, trial, damag
                 VP[i, a, b] = w * s
             else:
                 VP[i, a, b] = w * P[a, b]
-    return not (broken or (math.isfinite(e) and J[i] > 0.0))
+    return not (update.has_failed(failure, damaged, i) or (math.isfinite(e) and J[i] > 0.0))
 
 
 @njit(cache=True)

@@ -31,7 +31,7 @@ import re
 import h5py
 import numpy as np
 
-from parsph import config, readouts
+from parsph import config, interactions, readouts
 from parsph.errors import InputError, ParsphError
 from parsph.io.h5 import ParticleFile
 from parsph.io.output_dir import ensure_space
@@ -121,7 +121,7 @@ def state_of(sim) -> dict:
         "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in sim.point_sets()[1:]},
         "totals": {**sim.ledger.checkpoint(sim.comm), "wall_force": readouts.wall_forces(sim).tolist(),
                    "surface_torque": readouts.surface_torques(sim).tolist(),
-                   "rigid": [body.state() for body in sim.rigid_bodies]},
+                   "rigid": [body.state() for body in sim.rigid_bodies], **interactions.checkpoint(sim.interactions)},
         "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
                   "updates": sim.topology.count, "since_update": sim.topology.since, "first_stable": sim.stable.first},
     }

@@ -10,7 +10,7 @@ import dataclasses
 
 import numpy as np
 
-from parsph import quantities, readouts
+from parsph import quantities
 from parsph.fields import Field, register
 from parsph.errors import InputError
 from parsph.materials import damage, elastic, elastoplastic, johnson_cook, johnson_cook_failure, mie_gruneisen
@@ -78,10 +78,22 @@ def _failure_index(sim, sel):
     return out
 
 
+def law_readout(sim, sel: np.ndarray, name: str) -> np.ndarray:
+    """The material laws' read-out `name` (materials.law.Readout) of their last stress
+    evaluation's state at the owned particles `sel` (0 for the laws without it)."""
+    out = np.zeros(len(sel))
+    for b in sim.bodies:
+        readout = b.law.readouts.get(name)
+        if readout is not None:
+            rows = np.flatnonzero(sim.body[sel] == b.index)
+            out[rows] = readout.compute(b.constants.values, sim.material_state(b)[1][sel[rows]])
+    return out
+
+
 # the laws' read-outs (the first law that declares a name gives its units), damage and failure index
 quantities.register(
     *{name: quantities.Quantity(name, "scalar", readout.units, doc=readout.doc,
-                                compute=lambda sim, sel, name=name: readouts.law_readout(sim, sel, name))
+                                compute=lambda sim, sel, name=name: law_readout(sim, sel, name))
       for law in reversed(LAWS.values()) for name, readout in law.readouts.items()}.values(),
     quantities.Quantity("damage", "scalar", "1", doc="damage D (0 without a failure model; 1: failed)",
                         compute=_damage),

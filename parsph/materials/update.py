@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph.materials import elastic, elastoplastic, johnson_cook, mie_gruneisen
+from parsph.materials import damage, elastic, elastoplastic, johnson_cook, johnson_cook_failure, mie_gruneisen
 
 WORK = elastoplastic.WORK  # the most scratch matrices a law uses
 J2_PLASTICITY = elastoplastic.J2_PLASTICITY
@@ -42,6 +42,32 @@ def update(law, F, dim, c, state, trial, i, P, work, dt):
     if law == MIE_GRUNEISEN:
         return mie_gruneisen.update(F, dim, c, state, trial, i, P, work, dt)
     return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
+
+
+@njit(cache=True, inline="always")
+def has_failed(failure, damaged, i):
+    """Whether point i has failed (damage 1) under the failure model `failure` (0: none)."""
+    broken = False
+    if failure:
+        broken = damaged[i, damage.DAMAGE] >= 1.0
+    return broken
+
+
+@njit(cache=True, inline="always")
+def update_failing(law, failure, F, dim, c, state, trial, damaged, damaged_trial, i, P, work, dt):
+    """update() under the point's failure model `failure` (0: none, damage.TENSILE,
+    johnson_cook_failure.JOHNSON_COOK_FAILURE; a compile-time constant too), its state in row
+    i of `damaged` (new: `damaged_trial`): a failed point (damage 1) carries no stress and
+    its law is not evaluated; otherwise tensile damage degrades the law's stress, or the
+    Johnson-Cook index accumulates."""
+    if has_failed(failure, damaged, i):
+        return damage.failed(F, dim, damaged, damaged_trial, i, P)
+    e = update(law, F, dim, c, state, trial, i, P, work, dt)
+    if failure == damage.TENSILE:
+        damage.degrade(P, F, dim, damaged, damaged_trial, i, work)
+    elif failure == johnson_cook_failure.JOHNSON_COOK_FAILURE:
+        johnson_cook_failure.accumulate(P, F, dim, c, state, trial, damaged, damaged_trial, i, work, dt)
+    return e
 
 
 @njit(cache=True, inline="always")
