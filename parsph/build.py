@@ -191,7 +191,7 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
     if neighbours > 0:
         owned["support"] = _neighbour_support(X, neighbours, comm)
     else:
-        owned["support"] = scene["kernel"]["support"] * _spacing(body["parts"], gens, measure, dim)
+        owned["support"] = config.kernel_of(scene, body)["support"] * _spacing(body["parts"], gens, measure, dim)
     return owned
 
 

@@ -74,8 +74,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
         **FAILURE_KEYS,  # the failure models' (materials.FAILURES)
         "break_pairs": Key("bool", False, None,
                            "with a failure model: a failed particle (damage 1) loses its pairs, so that cracks "
-                           "open and the failed particles fly free (default: they keep them, as [G §4.6]); "
-                           "total-Lagrangian kernels, no symmetry planes"),
+                           "open and the failed particles fly free (default: they keep them, as [G §4.6])"),
     },
     "formulation": {
         "type": Key("str", "tlsph", one_of(*FORMULATIONS), "; ".join(
@@ -784,6 +783,9 @@ BODY_KEYS = {
     "parts": Key("table", REQUIRED, doc="array of shapes, united, as geometry.parts"),
     "material": Key("table", REQUIRED, doc="the body's material, as [material]"),
     "formulation": Key("table", {}, doc="keys of [formulation] that differ for this body"),
+    "kernel": Key("table", {}, doc="keys of [kernel] that differ for this body: type, support (the bodies with "
+                                   "one kernel, Hessian stabilisation and update schedule share one kernel "
+                                   "relation: parsph.kernel_relation)"),
     "rigid": Key("bool", False, None, "the body moves as one rigid body and carries no stress (parsph.rigid): "
                                       "as [[bc]] holding all of it prescribe, else freely"),
 }
@@ -810,25 +812,26 @@ def _validate_bodies(raw_bodies: Any, raw_formulation: Any, dim: int) -> list:
             raise InputError(f"{path}.formulation must be a table")
         merged = dict(raw_formulation if isinstance(raw_formulation, dict) else {}, **body["formulation"])
         body["formulation"] = _formulation(f"{path}.formulation", merged, dim)
+        body["kernel"] = _table(f"{path}.kernel", body["kernel"],
+                                {name: SECTIONS["kernel"][name] for name in BODY_KERNEL_KEYS}, dim)
+        body["kernel"] = {name: value for name, value in body["kernel"].items() if name in raw.get("kernel", {})}
+        if not body["kernel"]:  # absent, as in scenes written before the key existed
+            del body["kernel"]
         if not body["rigid"]:  # absent, as in scenes written before the key existed
             del body["rigid"]
         out.append(body)
     if not out:
         raise InputError("bodies is empty: give at least one [[bodies]] table, or none and a [material]")
     _check_updated_bodies(out)
-    stabilised = {(b["formulation"]["hessian"], b["formulation"]["hessian_correction"]) for b in out
-                  if b["formulation"]["hessian"] > 0}
-    if len(stabilised) > 1:
-        raise InputError("formulation.hessian: the bodies with Hessian stabilisation must share its value and "
-                         f"hessian_correction, got {sorted(stabilised)}")
     return out
 
 
 def _check_updated_bodies(bodies_: list) -> None:
-    """The bodies whose reference moves (ulsph, or an Eulerian kernel) move it together: one
-    kind and one schedule (the reference update is one step of the whole scene); the other
-    bodies keep their initial reference beside them."""
-    moving = [(i, b["formulation"]) for i, b in enumerate(bodies_) if _moves(b)]
+    """The bodies whose reference moves (ulsph, or an Eulerian kernel) are of one kind: an
+    Eulerian kernel moves its reference inside every step, ulsph between steps (each group
+    of bodies on its own schedule: parsph.kernel_relation); the other bodies keep their
+    initial reference beside them."""
+    moving = [(i, b["formulation"]) for i, b in enumerate(bodies_) if moves(b)]
     if not moving:
         return
     first, form = moving[0]
@@ -836,25 +839,17 @@ def _check_updated_bodies(bodies_: list) -> None:
         if (other.get("kernel") == "eulerian") != (form.get("kernel") == "eulerian"):
             raise InputError(f"bodies[{i}].formulation: a scene's bodies with an updated reference are all "
                              f"type = 'ulsph' or all kernel = 'eulerian' (bodies[{first}] differs)")
-        for key in ("update_every", "update_strain", "search_every", "skin"):
-            if other.get(key) != form.get(key):
-                raise InputError(f"bodies[{i}].formulation.{key} = {other.get(key)!r}: the bodies with an updated "
-                                 f"reference update it together and share {key} (bodies[{first}] has "
-                                 f"{form.get(key)!r})")
-    for i, b in enumerate(bodies_):
-        if b["material"]["break_pairs"]:
-            raise InputError(f"bodies[{i}].material.break_pairs cannot be used in a scene with a body of "
-                             f"type = 'ulsph' or kernel = 'eulerian' (bodies[{first}]): pairs break in a fixed "
-                             "reference")
 
 
-def moving_formulation(scene: dict) -> dict | None:
-    """The formulation of the scene's first body whose reference moves (they share its
-    schedule), or None."""
-    return next((b["formulation"] for b in bodies(scene) if _moves(b)), None)
+BODY_KERNEL_KEYS = ("type", "support")  # the keys of [kernel] a body may change
 
 
-def _moves(body: dict) -> bool:
+def kernel_of(scene: dict, body: dict) -> dict:
+    """A resolved body's kernel: [kernel] with the body's own keys over it."""
+    return dict(scene["kernel"], **body.get("kernel", {}))
+
+
+def moves(body: dict) -> bool:
     """Whether a resolved body's reference moves (a rigid body carries no reference)."""
     return not body.get("rigid", False) and _kept_lists(body["formulation"])
 
@@ -913,6 +908,10 @@ def validate(raw: dict) -> dict:
     else:
         scene["geometry"]["parts"] = _validate_parts(scene["geometry"]["parts"], dim)
         _validate_material("material", scene["material"])
+    for i, body in enumerate(scene.get("bodies", ())):
+        if "support" in body.get("kernel", {}) and scene["kernel"]["neighbours"] > 0:
+            raise InputError(f"bodies[{i}].kernel.support: kernel.neighbours = {scene['kernel']['neighbours']} "
+                             "sets every particle's support from its neighbours")
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
     scene["groups"] = _validate_groups(raw.get("groups"), dim,
                                        sum(p["shape"] == "mesh" for b in bodies(scene) for p in b["parts"]))
@@ -924,11 +923,9 @@ def validate(raw: dict) -> dict:
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
     for body in bodies(scene):
-        mat, form = body["material"], body["formulation"]
-        if mat["break_pairs"] and (not failure_of(mat) or _kept_lists(form) or scene["symmetry"]):
-            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1), a "
-                             "total-Lagrangian kernel (not ulsph, not formulation.kernel = 'eulerian') and no "
-                             "[[symmetry]] planes")
+        mat = body["material"]
+        if mat["break_pairs"] and not failure_of(mat):
+            raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1)")
         if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
             del mat["break_pairs"]
     if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):
@@ -942,7 +939,7 @@ def validate(raw: dict) -> dict:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
     if "ties" in raw:
         entries = [_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))]
-        scene["ties"] = ties.check(entries, scene, bodies(scene), _moves)
+        scene["ties"] = ties.check(entries, scene, bodies(scene), moves)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 

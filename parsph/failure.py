@@ -10,21 +10,24 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph import conditions
-from parsph.formulations import reference
+from parsph.kernel_relation import Configuration
 from parsph import materials
 from parsph.ledger import intact_law_work, start_damage_work
 from parsph.materials import damage
 from parsph.neighbors import crossing, find_pairs
+from parsph.parallel.mirrors import reflected_pairs
 from parsph.parallel.runtime import collective
 
 
 class Failure:
-    """The bodies' failure models and which local particles have lost their pairs."""
+    """The bodies' failure models, which local particles have lost their pairs and which
+    pairs cracks have cut (`cut`: from a checkpoint, io.checkpoint)."""
 
-    def __init__(self, bodies: list, dim: int, comm):
+    def __init__(self, bodies: list, dim: int, comm, cut: np.ndarray | None = None):
         self.bodies, self.dim, self.comm = bodies, dim, comm
         self.breaking = any(b.breaks_pairs for b in bodies)  # some body's failed particles lose their pairs
         self.detached = None  # per local row: failed and without pairs (None if no body breaks pairs)
+        self.cut = cut  # the pair_keys of the pairs cracks have cut (crack), on every rank; None: not known
 
     def advance(self, sim, dt: float) -> None:
         """Each body's failure model advances from the committed state over the coming step dt
@@ -54,22 +57,49 @@ class Failure:
         breaking = np.array([b.breaks_pairs for b in self.bodies])
         return breaking[body[: len(state)]] & (state[:, damage.DAMAGE] >= 1.0)
 
-    def crack(self, searched, X: np.ndarray, measure: np.ndarray, gid: np.ndarray, n: int,
-               detached) -> np.ndarray | None:
-        """The keys of the pairs the failed particles cut (neighbors.crossing), over all ranks:
-        each owned failed particle's from its neighbours in the reference X (`searched`:
-        neighbors.find_pairs of the owned rows, needed where one has failed) (collective)."""
+    def crack(self, searched, X: np.ndarray, measure: np.ndarray, gid: np.ndarray, n: int, fresh: np.ndarray,
+              planes: int = 0, total: int = 0) -> np.ndarray:
+        """The keys of the pairs cut so far (remembered by global ids, on every rank: a cut
+        pair stays cut through reference updates, migration and searches) with those the
+        crack through each owned particle of `fresh` cuts (neighbors.crossing; `searched`:
+        neighbors.find_pairs of the owned rows, needed where one is fresh), and with
+        `planes` symmetry planes their mirror images' (mirrors.reflected_pairs: `total`
+        particles) (collective). The crossing test runs in the configuration the pairs are
+        built in: X of a total-Lagrangian body, the current updated reference X^r of an
+        updated or Eulerian one (the crack goes through a particle where it is when it
+        fails; a detached particle that has since moved cuts nothing more)."""
+        rows = np.flatnonzero(fresh[:n])
+        keys = np.zeros(0, np.int64)
+        if len(rows):
+            keys = crossing(searched, X, gid, measure ** (1.0 / self.dim), rows)
+        known = [] if self.cut is None else [self.cut]
+        self.cut = np.unique(np.concatenate(known + self.comm.allgather(keys)))
+        if planes:
+            self.cut = reflected_pairs(self.cut, total, planes)
+        return self.cut
+
+    def known_cut(self, X: np.ndarray, measure: np.ndarray, support: np.ndarray, gid: np.ndarray, n: int,
+                  detached, planes: int, total: int) -> np.ndarray | None:
+        """The pairs cut at a set-up or a search (collective): those remembered (crack) or
+        restored from a checkpoint, else (a first set-up) those the detached particles cut
+        in the reference `X` the pairs are built in."""
         if detached is None:
             return None
-        failed = np.flatnonzero(detached[:n])
-        keys = np.zeros(0, np.int64)
-        if len(failed):
-            keys = crossing(searched, X, gid, measure ** (1.0 / self.dim), failed)
-        return np.unique(np.concatenate(self.comm.allgather(keys)))
+        if self.cut is not None:
+            return self.cut
+        searched = find_pairs(X, support, gid, n) if detached[:n].any() else None
+        return self.crack(searched, X, measure, gid, n, detached, planes, total)
+
+    def refresh(self, sim, state: np.ndarray) -> None:
+        """The damage `state` of the ghosts of both layers and of the mirror images (collective)."""
+        sim.decomp.refresh_all(state)
+        if sim.decomp.mirrors is not None:
+            sim.decomp.mirrors.copy_all(state)
 
     def break_pairs(self, sim) -> None:
         """Particles that have failed since the last call lose their pairs (collective): the
-        reference data is built again without them (materials.damage: cracks open), and
+        reference data is built again without them (materials.damage: cracks open), in the
+        reference it is built in (X, or X^r when updated; on the kept lists if any), and
         again while it leaves a particle with a singular correction matrix (a particle cut
         off from its body: it fails too). The forces are evaluated on the new pairs; the
         change of F this makes does no work (the particles do not move): an elasto-plastic
@@ -83,24 +113,27 @@ class Failure:
         new = self.failed(state[:n], sim.body) & ~self.detached[:n]
         if not sim.comm.allreduce(bool(new.any()), op=MPI.LOR):
             return
-        searched = find_pairs(sim.X, sim.support, sim.gid, n)  # in the reference: once for every round
+        # the configuration the reference data is built in (X, or X^r when updated)
+        X, measure, volume = (sim.Xr, sim.measure_r, sim.volume_r) if sim.updated else \
+            (sim.X, sim.measure, sim.volume)
+        searched = find_pairs(X, sim.support, sim.gid, n)  # in the reference: once for every round
+        planes = len(sim.scene["symmetry"])
         while True:
-            sim.decomp.refresh_all(state)
+            self.refresh(sim, state)
             detached = self.failed(state, sim.body)
             with collective(sim.comm):
-                cut = self.crack(searched, sim.X, sim.measure, sim.gid, n, detached)
-                ref = reference.build(
-                    sim.X, sim.measure, sim.volume, sim.support, sim.gid, n, sim.decomp.n_rows,
-                    sim.scene["kernel"]["type"], sim.body, [b.formulation.pair_options for b in sim.bodies],
-                    sim.eta, sim.weighted_hessian, detached=detached, cut=cut,
-                    tolerant=True)
-            if not sim.comm.allreduce(len(ref.bad)):
+                cut = self.crack(searched, X, measure, sim.gid, n, detached[:n] & ~self.detached[:n], planes,
+                                 sim.decomp.total)
+                bad = sim.topology.build(Configuration(X, measure, volume, sim.support, sim.gid, sim.body, n,
+                                                       sim.decomp.n_rows),
+                                         search=False, detached=detached, cut=cut, tolerant=True)
+            if not sim.comm.allreduce(len(bad)):
                 break
             for b in (b for b in self.bodies if b.failure):  # cut off from their bodies: they fail too
-                cut_off = ref.bad[(ref.bad >= b.lo) & (ref.bad < b.hi)]
+                cut_off = bad[(bad >= b.lo) & (bad < b.hi)]
                 start_damage_work(sim, b, cut_off[state[cut_off, damage.DAMAGE] == 0.0])
-            state[ref.bad, damage.DAMAGE] = trial[ref.bad, damage.DAMAGE] = 1.0
-        sim.ref, self.detached = ref, detached  # the stages read sim.ref when they run
+            state[bad, damage.DAMAGE] = trial[bad, damage.DAMAGE] = 1.0
+        self.detached = detached  # the stages read their relation's reference data when they run
         sim.exclude_kernel_pairs()
         penalty = sim.hg_psi.copy()
         held = intact_law_work(sim)

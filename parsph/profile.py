@@ -376,7 +376,7 @@ class Profile:
         names = list(worst)
         local = np.array([[self.flops.get(k, 0.0), self.bytes.get(k, 0)] for k in names] or np.zeros((0, 2)))
         held = sum(a.nbytes for _, a in arrays_held(sim))
-        counts = np.array([sim.n_owned, len(sim.ref.idx), held], float)
+        counts = np.array([sim.n_owned, sim.topology.pair_count(), held], float)
         if comm.size > 1:
             local = comm.allreduce(local)
             counts = comm.allreduce(counts)

@@ -42,20 +42,31 @@ def quadrature(sim) -> tuple:
 
 def disorder(sim) -> np.ndarray:
     """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
-    out = np.empty(sim.n_owned)
-    ref = sim.ref
-    tlsph.hourglass_error(sim.dim)(sim.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, sim.d, sim.fs, out,
-                                    sim.scratch33)
-    return out
+    error = tlsph.hourglass_error(sim.dim)
+    return by_relation(sim, lambda ref, out: error(sim.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, sim.d, sim.fs, out,
+                                                   sim.scratch33))
 
 
 def spacing_ratio(sim) -> np.ndarray:
     """Current-configuration disorder of each owned particle (tlsph.spacing_ratio), with the
     ghosts where the last force evaluation saw them."""
-    out = np.empty(sim.n_owned)
-    ref = sim.ref
     x = sim.Xr + sim.d if sim.updated else sim.X + sim.u
-    tlsph.spacing_ratio(sim.n_owned, ref.ptr, ref.idx, x, sim.measure, sim.F, sim.dim, out, sim.scratch33)
+    return by_relation(sim, lambda ref, out: tlsph.spacing_ratio(sim.n_owned, ref.ptr, ref.idx, x, sim.measure,
+                                                                 sim.F, sim.dim, out, sim.scratch33))
+
+
+def by_relation(sim, fill) -> np.ndarray:
+    """A value per owned particle that `fill(ref, out)` writes row by row from a kernel
+    relation's reference data: each body's rows from its own relation."""
+    out = np.empty(sim.n_owned)
+    for r in sim.topology.relations:
+        if r.whole:
+            fill(r.ref, out)
+            continue
+        part = np.empty(sim.n_owned)
+        fill(r.ref, part)
+        for b in r.bodies:
+            out[b.lo:b.hi] = part[b.lo:b.hi]
     return out
 
 

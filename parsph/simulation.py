@@ -50,7 +50,7 @@ class Simulation:
         self.offsets = np.asarray(offsets, np.int64)
         self.bodies = [Body(b, spec, int(self.offsets[b]), int(self.offsets[b + 1]), dim)
                        for b, spec in enumerate(specs)]
-        self.failure = Failure(self.bodies, dim, comm)
+        self.failure = Failure(self.bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, self.bodies, local, comm)
         settle(self)
         self.rebalance = scene["parallel"]["rebalance"]
@@ -109,7 +109,7 @@ class Simulation:
     def exclude_kernel_pairs(self) -> None:
         """Tell a self-contact the kernel's pairs, which it leaves out (parsph.contact)."""
         if self.contact:
-            self.contact.exclude(self.ref, self.gid)
+            self.contact.exclude(self.topology.kernel_pairs(), self.gid)
 
     def point_set(self, name: str) -> PointSet:
         return self.particles if name == "particles" else self.sets[name]
@@ -236,18 +236,19 @@ class Simulation:
         prescribe_velocity(self, self.t)
         self.ledger.end(self, dt)
         self.step_count += 1
-        self.topology.since += 1
+        self.topology.stepped()
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))
-        # an update that is due by count makes this configuration's stable step moot
-        due = self.topology.due(self)
-        if not due:
+        # an update that is due by count makes this configuration's stable step moot (unless
+        # another relation may be due by strain)
+        due = self.topology.due()
+        if not due or self.topology.by_strain(due):
             clock = time.perf_counter()
-            self.stable.dt, strain = self.stable.next_step(self)
+            self.stable.dt, strains = self.stable.next_step(self)
             self.stage_seconds["stable step"] += time.perf_counter() - clock
-            due = self.topology.due(self, strain)
+            due = self.topology.due(strains)
         if due:
-            self.topology.update(self)
+            self.topology.update(self, due)
             clock = time.perf_counter()
             self.stable.dt = self.stable.next_step(self)[0]
             self.stage_seconds["stable step"] += time.perf_counter() - clock

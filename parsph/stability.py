@@ -39,45 +39,46 @@ class StableStep:
         self.first = clock.get("first_stable", 0.0) if clock else self.limit(sim)[0]
         self.floor = settings["step_floor"] * self.first if self.first < math.inf else 0.0
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
-        self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.topology.strain > 0)
+        self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.topology.adaptive)
 
     def next_step(self, sim) -> tuple:
-        """(size of the next step, largest incremental log strain): time.dt if fixed, else
-        time.cfl times the stable step; the strain for the adaptive reference update (0
-        unless it is enabled). Collective."""
+        """(size of the next step, each kernel relation's largest incremental log strain):
+        time.dt if fixed, else time.cfl times the stable step; the strains for the adaptive
+        reference update (0 unless it is enabled). Collective."""
         settings = self.settings
-        adaptive = sim.updated and sim.topology.strain > 0
+        adaptive = sim.updated and sim.topology.adaptive
         if settings["dt"] > 0:
-            return settings["dt"], self.limit(sim)[1] if adaptive else 0.0
-        step, strain = self.limit(sim)
-        return settings["cfl"] * step, strain
+            return settings["dt"], self.limit(sim)[1] if adaptive else np.zeros(len(sim.topology.relations))
+        step, strains = self.limit(sim)
+        return settings["cfl"] * step, strains
 
     def limit(self, sim) -> tuple:
-        """(stable step, largest incremental log strain) over all ranks, from
-        formulations.tlsph.stable_time_step (collective). A step of zero, or below
-        time.step_floor times the first one, raises the error naming the particle with the
-        smallest step on any rank."""
-        dt, strain, smallest = np.inf, 0.0, -1
-        ref = sim.ref
+        """(stable step, each kernel relation's largest incremental log strain) over all
+        ranks, from formulations.tlsph.stable_time_step (collective). A step of zero, or
+        below time.step_floor times the first one, raises the error naming the particle
+        with the smallest step on any rank."""
+        dt, smallest = np.inf, -1
+        strains = np.zeros(len(sim.topology.relations))
         for b in sim.bodies:  # in row order: the first particle with the smallest step
             if b.rigid:
                 step, worst, first = rigid.stable_step(b, sim.omega_c2, sim.step_limit, sim.v, sim.contact)
             else:
+                ref = b.relation.ref
                 step, worst, first = tlsph.stable_time_step(
                     b.lo, b.hi, sim.fs if b.moves else sim.F, sim.F, sim.J, ref.min_spacing, ref.stiffening,
                     b.constants.wave_speed, b.law.law_id, b.constants.values, sim.dim, sim.broken, sim.omega_hg2,
                     b.formulation.hourglass_form, sim.omega_c2, sim.step_limit, sim.scratch33)
             if b.moves:  # the strain since a reference that moves
-                strain = max(strain, worst)
+                strains[b.relation.index] = max(strains[b.relation.index], worst)
             if step < dt or (first >= 0 and not step > 0.0):
                 dt, smallest = step, first
             if not step > 0.0:
                 break
-        reduced = np.array([-dt, strain])
+        reduced = np.array([-dt, *strains])
         if sim.comm.size > 1:
             sim.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
         if -reduced[0] == math.inf and self.settings["dt"] > 0:  # nothing bounds a fixed step: it is the user's
-            return math.inf, reduced[1]
+            return math.inf, reduced[1:]
         if -reduced[0] == math.inf:
             why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in sim.bodies)
                    else "every particle has failed completely (damage 1) and carries no stress; the run is stopped, "
@@ -88,7 +89,7 @@ class StableStep:
             raise error
         if not -reduced[0] > self.floor:
             raise self.collapsed(sim, -reduced[0], dt, smallest)
-        return -reduced[0], reduced[1]
+        return -reduced[0], reduced[1:]
 
     def standstill(self, sim) -> ParsphError:
         """The error for a step too small to advance the clock (below its rounding)."""
@@ -178,13 +179,15 @@ def unstable_point(sim, points: str, q: int) -> ParsphError:
 def check_hourglass_stiffness(sim) -> None:
     """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
     frequency squared, overflows (an absurd formulation.hourglass). At set-up."""
-    n, ref = sim.n_owned, sim.ref
-    if not sim.hourglass or not len(ref.idx):
+    n = sim.n_owned
+    if not sim.hourglass:
         return
-    rows = np.repeat(np.arange(n), np.diff(ref.ptr))
-    with np.errstate(over="ignore", invalid="ignore"):
-        k = ref.hgc * (sim.youngs[rows] + sim.youngs[ref.idx])
-        out = 2.0 * np.bincount(rows, weights=k, minlength=n) / sim.mass[:n]
+    out = np.zeros(n)
+    for ref in (r.ref for r in sim.topology.relations if len(r.ref.hgc)):  # the rows of a relation's bodies
+        rows = np.repeat(np.arange(n), np.diff(ref.ptr))
+        with np.errstate(over="ignore", invalid="ignore"):
+            k = ref.hgc * (sim.youngs[rows] + sim.youngs[ref.idx])
+            out += 2.0 * np.bincount(rows, weights=k, minlength=n) / sim.mass[:n]
     with collective(sim.comm):
         bad = np.flatnonzero(~np.isfinite(out))
         if len(bad):

@@ -17,8 +17,8 @@ import numpy as np
 from parsph import config, fields, interactions, materials
 from parsph.bc import BoundaryConditions, Tractions
 from parsph.collocation import BoundaryCollocation, collocated
-from parsph.formulations import FORMULATIONS, reference, tlsph
-from parsph.neighbors import find_pairs
+from parsph.formulations import FORMULATIONS, tlsph
+from parsph.kernel_relation import Configuration
 from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
@@ -48,19 +48,21 @@ class Body:
         self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0
         self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
+        self.relation = None  # its kernel relation (kernel_relation.KernelRelation), set by the topology
         self.stages = []
 
 
 def settle(sim) -> None:
     """What the bodies settle for the whole particle set: whether a reference moves (in
-    every step: Eulerian), the Hessian stabilisation and hourglass control the bodies
-    share, and the owners of the registered fields the particles carry (parsph.fields)."""
+    every step: Eulerian), whether some body has Hessian stabilisation or hourglass control
+    (their arrays), and the owners of the registered fields the particles carry
+    (parsph.fields). Each body's kernel, eta and schedule are its kernel relation's
+    (parsph.kernel_relation)."""
     forms = [b.formulation for b in sim.bodies]
-    moving = [b.formulation for b in sim.bodies if b.moves]  # their reference moves, together (config)
+    moving = [b.formulation for b in sim.bodies if b.moves]  # their reference moves (all ulsph or all Eulerian: config)
     sim.updated = bool(moving)
     sim.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
-    sim.eta = max(f.eta for f in forms)  # the bodies with Hessian stabilisation share it (config)
-    sim.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
+    sim.eta = max(f.eta for f in forms)  # > 0: some body has Hessian stabilisation (its relation's eta)
     sim.hourglass = any(f.hourglass_form for f in forms)
     # the formulations, laws and their states, the updated reference and damage the bodies use
     sim.owners = {f.type for f in forms} | {b.law.name for b in sim.bodies} | {b.law.state for b in sim.bodies}
@@ -76,7 +78,8 @@ def settle(sim) -> None:
 def adopt(sim, local: LocalBody) -> None:
     """Take `local` (owned particles with two ghost layers and all their arrays) as this
     rank's particles: mirror images across symmetry planes (parallel.mirrors), halo plan,
-    reference data in the reference configuration (X, or X^r when updated), the carried
+    the kernel relations' reference data in the reference configuration (X, or X^r when
+    updated; parsph.topology), the carried
     fields (parsph.fields) and work arrays for owned particles and layer-1 ghosts."""
     updated = sim.updated and "Xr" in local.fields
     ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
@@ -85,18 +88,14 @@ def adopt(sim, local: LocalBody) -> None:
                                     skin=sim.topology.skin if sim.updated else 0.0)
         fl, n, dim = local.fields, local.n_owned, sim.dim
         # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
-        layer2 = sim.topology.rule.every > 1 or sim.failure.breaking
+        layer2 = sim.topology.keeps or sim.failure.breaking
         sim.decomp = Decomposition(local, sim.comm, mirrors, layer2=layer2)
         body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
         sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
-        failed = sim.failure.detached is not None and sim.failure.detached[:n].any()
-        searched = find_pairs(fl["X"], fl["support"], local.gid, n) if failed else None
-        cut = sim.failure.crack(searched, fl["X"], fl["measure"], local.gid, n, sim.failure.detached)
-        sim.ref = reference.build(
-            fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, n, sim.decomp.n_rows,
-            sim.scene["kernel"]["type"], body, [b.formulation.pair_options for b in sim.bodies],
-            sim.eta, sim.weighted_hessian, skin=sim.topology.skin if sim.updated else None, detached=sim.failure.detached,
-            cut=cut)
+        cut = sim.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, sim.failure.detached,
+                                    len(sim.scene["symmetry"]), local.total)
+        sim.topology.build(Configuration(fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, body, n,
+                                         sim.decomp.n_rows), detached=sim.failure.detached, cut=cut)
     if layer2:
         keep = len(local.gid)
     else:
@@ -158,7 +157,7 @@ def adopt(sim, local: LocalBody) -> None:
     sim.sets = {name: adopt_set(sim, name, other) for name, other in (local.sets or {}).items()}
     with collective(sim.comm):  # the formulations' own relations
         for b in sim.bodies:
-            b.formulation.build(sim, b, sim.scene["kernel"]["type"])
+            b.formulation.build(sim, b, b.relation.kernel)
     with collective(sim.comm):
         parameters = sim.scene["parameters"]
         sim.bcs = BoundaryConditions(sim.scene["bc"], sim.groups, sim.X[:n], sim.gid[:n], parameters,

@@ -1,11 +1,14 @@
-"""The topology of the bodies whose reference moves (ulsph, the Eulerian kernel): when
-their reference is updated and how, with the neighbour lists and ghost layers it needs.
+"""The topology: the kernel relations of the bodies (parsph.kernel_relation), in order, and
+for those whose reference moves (ulsph, the Eulerian kernel) when it is updated and how, with
+the neighbour lists and ghost layers it needs.
 
 An update makes the current configuration the reference [V §3.1]: X^r = x, F^r = F,
-V^r = J V^0 (Remark 1). It searches (new ownership if the work is out of balance,
-migration, ghosts and neighbours in X^r) at most every search_every updates, with lists
-and ghost layers a skin wider, and in between rebuilds the reference data on the kept
-lists: the same result as a search at every update (relations.Skin).
+V^r = J V^0 (Remark 1), for the bodies of the relations that are due; the others keep their
+reference. It searches (new ownership if the work is out of balance, migration, ghosts and
+neighbours in X^r: every relation built anew) at most every search_every updates of a due
+relation, with lists and ghost layers a skin wider, and in between rebuilds the due
+relations' reference data on their kept lists: the same result as a search at every update
+(relations.Skin).
 """
 
 from __future__ import annotations
@@ -14,169 +17,226 @@ import contextlib
 import time
 
 import numpy as np
-from mpi4py import MPI
 
-from parsph import conditions, config, fields, state
+from parsph import conditions, fields, state
 from parsph.collocation import BoundaryCollocation
 from parsph.errors import InputError, ParsphError
-from parsph.formulations import reference
+from parsph.kernel_relation import Configuration, KernelRelation, groups, reach
 from parsph.parallel.decomposition import add_ghosts, localize, partition
 from parsph.parallel.runtime import collective
-from parsph.relations import Skin
+from parsph.relations import Relation
 
 
 class Topology:
-    """The update schedule of the moving bodies (they share it: config), the search rule
-    and skin of the current lists, and the updates so far."""
+    """The kernel relations of the bodies, each with its own kernel, stabilisation, update
+    schedule, list rule and updates so far (kernel_relation.KernelRelation)."""
 
     def __init__(self, scene: dict, bodies: list, local, comm):
-        forms = [b.formulation for b in bodies]
-        schedule = ([b.formulation for b in bodies if b.moves] or forms)[0]
-        self.every, self.strain = schedule.update_every, schedule.update_strain  # by steps, by log strain
-        # the neighbour lists and ghost layers of an updated reference: searched at most every
-        # search_every updates, kept while no particle has moved half the skin since
-        supports = local.fields["support"][: local.n_owned]
-        kept = config.moving_formulation(scene) or config.bodies(scene)[0]["formulation"]
-        self.rule = Skin(config.skin(kept) * comm.allreduce(
-            float(supports.max()) if len(supports) else 0.0, op=MPI.MAX), comm,
-            config.search_every(kept))
-        self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
-        self.count = 0  # reference updates so far
-        self.since = 0  # steps since the last one
+        length = reach(local.fields["support"][: local.n_owned], comm)
+        self.relations = [KernelRelation(k, group, bodies, scene, length, comm)
+                          for k, group in enumerate(groups(bodies, scene))]
+
+    @property
+    def count(self) -> int:
+        """Reference updates so far, of all relations."""
+        return sum(r.count for r in self.relations)
+
+    @property
+    def skin(self) -> float:
+        """The widest skin of the current lists (the ghost layers': a relation's lists may be
+        searched wider than its own skin)."""
+        return max(r.skin for r in self.relations)
+
+    @property
+    def keeps(self) -> bool:
+        """Whether some relation keeps its lists between searches."""
+        return any(r.rule.every > 1 for r in self.relations)
+
+    @property
+    def adaptive(self) -> bool:
+        """Whether some relation updates its reference by strain."""
+        return any(r.moves and r.strain > 0 for r in self.relations)
+
+    def clock(self) -> dict:
+        """The updates so far, for a checkpoint: each relation's (count, since) beyond the
+        first's, which a scene of one relation writes alone."""
+        first = self.relations[0]
+        out = {"updates": first.count, "since_update": first.since}
+        if len(self.relations) > 1:
+            out["relation_updates"] = [[r.count, r.since] for r in self.relations]
+        return out
 
     def restore(self, clock: dict) -> None:
-        self.count, self.since = clock.get("updates", 0), clock.get("since_update", 0)
+        counts = clock.get("relation_updates", [[clock.get("updates", 0), clock.get("since_update", 0)]])
+        for r, (count, since) in zip(self.relations, counts):
+            r.count, r.since = count, since
 
-    def due(self, sim, strain: float | None = None) -> bool:
-        """Whether an update is due between steps: by count, or (given the largest
-        incremental log strain) by strain. The Eulerian kernel moves inside its steps."""
-        if not sim.updated or sim.eulerian:
-            return False
-        if strain is None:
-            return bool(self.every) and self.since >= self.every
-        return bool(self.strain) and strain > self.strain
+    def stepped(self) -> None:
+        for r in self.relations:
+            r.since += 1
 
-    def update(self, sim) -> None:
-        """Make the current configuration the reference [V §3.1] between steps
-        (move) and evaluate the forces in it."""
-        self.move(sim)
+    def due(self, strains=None) -> list:
+        """The relations whose reference update is due between steps: by count, or also (given
+        each relation's largest incremental log strain) by strain."""
+        if strains is None:
+            return [r for r in self.relations if r.due()]
+        return [r for r, strain in zip(self.relations, strains) if r.due() or r.due(strain)]
+
+    def by_strain(self, due: list) -> bool:
+        """Whether a relation not in `due` may be due by strain."""
+        return any(r.moves and not r.eulerian and r.strain and r not in due for r in self.relations)
+
+    def build(self, at: Configuration, **how) -> np.ndarray:
+        """Every relation's reference data in configuration `at` (KernelRelation.build);
+        returns the singular rows (with `tolerant`)."""
+        return np.concatenate([r.build(at, **how).bad for r in self.relations])
+
+    def kernel_pairs(self) -> Relation:
+        """The pairs of all relations (CSR rows of the owned particles)."""
+        if len(self.relations) == 1:
+            return self.relations[0].ref
+        refs = [r.ref for r in self.relations]
+        rows = np.concatenate([np.repeat(np.arange(len(ref.ptr) - 1), np.diff(ref.ptr)) for ref in refs])
+        order = np.argsort(rows, kind="stable")  # rows are disjoint: each row's pairs from one relation
+        ptr = np.zeros(len(refs[0].ptr), np.int64)
+        np.cumsum(np.bincount(rows, minlength=len(ptr) - 1), out=ptr[1:])
+        return Relation(ptr, np.concatenate([ref.idx for ref in refs])[order])
+
+    def pair_count(self) -> int:
+        return sum(len(r.ref.idx) for r in self.relations)
+
+    def update(self, sim, due: list | None = None) -> None:
+        """Make the current configuration the reference [V §3.1] of the `due` relations'
+        bodies (None: of every body whose reference moves) between steps (move) and evaluate
+        the forces in it."""
+        self.move(sim, [r for r in self.relations if r.moves] if due is None else due)
         sim.compute_forces()
         sim.ledger.external = conditions.external_force(sim)
 
-    def move(self, sim) -> bool:
-        """Make the current configuration the reference [V §3.1]: X^r = x, F^r = F,
-        V^r = J V^0 (Remark 1); re-decide ownership (parallel RCB of X^r) if the work is
-        out of balance, migrate the particles with their state, find ghosts and neighbours
-        in X^r and rebuild the corrections. An Eulerian kernel (a move inside every step)
-        searches at most every search_every steps, with lists and ghost layers a skin wider,
-        and in between rebuilds the reference on the kept lists (_recommit): the same result
-        as a search every step. Returns whether it searched (the arrays are new)."""
+    def move(self, sim, due: list | None = None) -> bool:
+        """Make the current configuration the reference [V §3.1] of the `due` relations'
+        bodies (None: the Eulerian ones): X^r = x, F^r = F, V^r = J V^0 (Remark 1);
+        re-decide ownership (parallel RCB of X^r) if the work is out of balance, migrate the
+        particles with their state, find ghosts and neighbours in X^r and rebuild the
+        corrections. A relation that keeps its lists searches at most every search_every of
+        its updates, with lists and ghost layers a skin wider, and in between rebuilds its
+        reference on the kept lists (_recommit): the same result as a search every time.
+        Returns whether it searched (the arrays are new)."""
         start = time.perf_counter()
-        for b in sim.bodies:  # the penalty restarts at 0
-            if b.moves:
-                sim.ledger.totals["hourglass_released"][b.index].add(sim.hg_psi[b.lo:b.hi])
+        due = [r for r in self.relations if r.eulerian] if due is None else due
+        bodies = [b for r in due for b in r.bodies if b.moves]
+        for b in bodies:  # the penalty restarts at 0
+            sim.ledger.totals["hourglass_released"][b.index].add(sim.hg_psi[b.lo:b.hi])
+        moving = np.isin(sim.body, [b.index for b in bodies])  # the rows whose reference moves now
         n = sim.n_owned
-        moved = {name: self._moved(sim, name) for name in sim.sets}  # stress points at the current configuration
-        x = sim.X[:n] + sim.u[:n] if sim.all_move else \
-            np.where(sim.moves[:n, None], sim.X[:n] + sim.u[:n], sim.Xr[:n])  # the new reference
-        searching = self.rule.every == 1 or self.rule.due(np.concatenate([x, *moved.values()]))
+        moved = {name: self._moved(sim, name, bodies) for name in sim.sets}  # stress points at the current configuration
+        x = sim.X[:n] + sim.u[:n] if moving.all() else \
+            np.where(moving[:n, None], sim.X[:n] + sim.u[:n], sim.Xr[:n])  # the new reference
+        points = np.concatenate([x, *moved.values()])
+        searching = any(r.rule.every == 1 or r.rule.due(points, r.rows(sim)) for r in due)
         if searching:
-            self._search(sim, moved)
+            self._search(sim, moved, moving)
         else:
-            self._recommit(sim, moved)
-        self.rule.stepped()
+            self._recommit(sim, moved, moving, due)
+        for r in due:
+            r.rule.stepped()
+            r.count += 1
+            r.since = 0
         sim.stage_seconds["reference update"] += time.perf_counter() - start
-        self.count += 1
-        self.since = 0
         return searching
 
-    def _search(self, sim, moved: dict) -> None:
-        """The reference update with a new decomposition: ownership, ghosts, neighbours
-        (`moved`: the owned points of the other sets at their new reference, _moved)."""
+    def _search(self, sim, moved: dict, moving: np.ndarray) -> None:
+        """The reference update with a new decomposition: ownership, ghosts, every relation
+        (`moved`: the owned points of the other sets at their new reference, _moved; `moving`:
+        the rows whose reference moves)."""
         n = sim.n_owned
-        owned = dict(sim.particles.migrating(), **self._new_reference(sim), **sim.ledger.in_flight(sim))
+        owned = dict(sim.particles.migrating(), **self._new_reference(sim, moving), **sim.ledger.in_flight(sim))
         # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
         sets = {name: dict(points.migrating(), Xr=moved[name], Fr=points.owned("F").copy())
                 for name, points in sim.sets.items()}
         if sim.comm.size > 1 and not sets:
-            work = np.array(sim.comm.allgather(len(sim.ref.idx) + n), float)
+            work = np.array(sim.comm.allgather(self.pair_count() + n), float)
             if work.max() > (1.0 + sim.rebalance) * work.mean():
                 owned = partition(owned, "Xr", sim.comm)
-        self.skin = self.rule.length if self.rule.every > 1 else 0.0
+        for r in self.relations:  # the new numbering of the rows: every relation searches
+            r.skin = r.rule.length if r.rule.every > 1 else 0.0
         with collective(sim.comm):
             local = localize(owned, sets, "Xr", sim.comm, self.skin) if sets else \
                 add_ghosts(owned, "Xr", sim.comm, skin=self.skin)
         sim.ledger.land(local.fields, local.n_owned)  # the step's start, with its particles
         with self._failure(sim):
             state.adopt(sim, local)
-        self.rule.searched(np.concatenate([sim.Xr[: sim.n_owned],
-                                           *(points.owned("Xr") for points in sim.sets.values())]))
+        points = np.concatenate([sim.Xr[: sim.n_owned], *(points.owned("Xr") for points in sim.sets.values())])
+        for r in self.relations:
+            r.rule.searched(points, r.rows(sim))
 
-    def _recommit(self, sim, moved: dict) -> None:
-        """The reference update between searches (Eulerian kernel): X^r = x, F^r = F,
-        V^r = J V^0 on the owned particles (and their moved stress points), every carried
-        field refreshed on both ghost layers, then the reference data and the Galerkin
-        relations rebuilt on the kept neighbour lists: the same as _search gives, without
-        repartitioning or finding neighbours. F, the stress and VP (formed for the current
-        configuration) stand; the motion from the new reference is the identity."""
+    def _recommit(self, sim, moved: dict, moving: np.ndarray, due: list) -> None:
+        """The reference update between searches: X^r = x, F^r = F, V^r = J V^0 on the owned
+        particles whose reference moves (`moving`, and their moved stress points), every
+        carried field refreshed on both ghost layers, then the `due` relations' reference
+        data and their bodies' Galerkin relations rebuilt on the kept neighbour lists: the
+        same as _search gives, without repartitioning or finding neighbours. F, the stress
+        and VP (formed for the current configuration) stand; the motion from the new
+        reference is the identity."""
         n = sim.n_owned
         eye = np.eye(sim.dim)
+        everything = bool(moving.all())
         for name, points in sim.sets.items():
             A = points.arrays
             A["Xr"][: points.n_owned] = moved[name]
             A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
             A["fs"][:] = eye
             points.refresh("Xr", "Fr")
-        for name, value in self._new_reference(sim).items():
+        for name, value in self._new_reference(sim, moving).items():
             getattr(sim, name)[:n] = value
         sim.particles.refresh_all(*(name for name in fields.migrating(sim.carried) if name != "gid"))
-        if sim.eulerian and sim.all_move:
+        if sim.eulerian and everything:
             sim.shift[:] = sim.u  # d = 0 exactly (state.reference_shift)
         else:
             np.subtract(sim.Xr, sim.X, out=sim.shift)
             if sim.eulerian:
-                np.copyto(sim.shift, sim.u, where=sim.moves[:, None])
-        if sim.all_move:
+                np.copyto(sim.shift, sim.u, where=moving[:, None])
+        if everything:
             sim.d[:] = 0.0
-        else:  # the bodies that keep their initial reference: d = u
+        else:  # the bodies that keep their reference: d = u - (X^r - X)
             np.subtract(sim.u, sim.shift, out=sim.d)
-            sim.d[sim.moves] = 0.0
+            sim.d[moving] = 0.0
         sim.fs[:] = eye
-        sim.hg_psi[sim.moves[: len(sim.hg_psi)]] = 0.0
+        sim.hg_psi[moving[: len(sim.hg_psi)]] = 0.0
+        at = Configuration(sim.Xr, sim.measure_r, sim.volume_r, sim.support, sim.gid, sim.body, n, sim.decomp.n_rows)
         with self._failure(sim), collective(sim.comm):
-            sim.ref = reference.build(
-                sim.Xr, sim.measure_r, sim.volume_r, sim.support, sim.gid, n, sim.decomp.n_rows,
-                sim.scene["kernel"]["type"], sim.body, [b.formulation.pair_options for b in sim.bodies],
-                sim.eta, sim.weighted_hessian, kept=sim.ref.kept)
+            for r in due:
+                r.build(at, search=False)
             sim.exclude_kernel_pairs()
-            for b in sim.bodies:
-                b.formulation.build(sim, b, sim.scene["kernel"]["type"], search=False)
+            for r in due:
+                for b in r.bodies:
+                    b.formulation.build(sim, b, r.kernel, search=False)
         if sim.collocation:
             sim.collocation = BoundaryCollocation(sim)
         for b in sim.bodies:
             b.stages = b.formulation.stages(sim, b)
 
     @staticmethod
-    def _new_reference(sim) -> dict:
+    def _new_reference(sim, moving: np.ndarray) -> dict:
         """The owned particles' new updated reference: X^r = x, F^r = F, V^r = J V^0 (Remark 1)
-        where it moves; the bodies that keep their initial reference keep it."""
+        where it moves (`moving`); the other rows keep theirs."""
         n = sim.n_owned
         new = dict(Xr=sim.X[:n] + sim.u[:n], Fr=sim.F[:n].copy(), measure_r=sim.J[:n] * sim.measure[:n],
                    volume_r=sim.J[:n] * sim.volume[:n])
-        if not sim.all_move:
-            still = ~sim.moves[:n]
+        if not moving.all():
+            still = ~moving[:n]
             for name, value in new.items():
                 value[still] = getattr(sim, name)[:n][still]
         return new
 
     @staticmethod
-    def _moved(sim, name: str) -> np.ndarray:
-        """The owned points of set `name` at their new updated reference, each body's moved
-        with its particles (formulations.galerkin.GalerkinFormulation.moved)."""
+    def _moved(sim, name: str, bodies: list) -> np.ndarray:
+        """The owned points of set `name` at their new updated reference, those of `bodies`
+        moved with their particles (formulations.galerkin.GalerkinFormulation.moved)."""
         Xr = sim.sets[name].owned("Xr").copy()
-        for b in sim.bodies:
+        for b in bodies:
             lo, hi = b.set_rows[name]
-            if hi > lo and b.moves:
+            if hi > lo:
                 Xr[lo:hi] = b.formulation.moved(sim, b)
         return Xr
 

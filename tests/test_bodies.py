@@ -95,8 +95,8 @@ def test_bodies_within_a_kernel_support_are_not_neighbours():
     raw["bodies"][1]["parts"][0]["lower"][0] = 0.1  # touching: one spacing between the lattices
     raw["bodies"][1]["parts"][0]["upper"][0] = 0.2
     sim = _sim(raw)
-    rows = np.repeat(np.arange(sim.n_owned), np.diff(sim.ref.ptr))
-    assert len(rows) and np.array_equal(sim.body[rows], sim.body[sim.ref.idx])
+    rows = np.repeat(np.arange(sim.n_owned), np.diff(sim.topology.relations[0].ref.ptr))
+    assert len(rows) and np.array_equal(sim.body[rows], sim.body[sim.topology.relations[0].ref.idx])
     near = np.abs(sim.X[:, 0] - 0.1) < 0.01  # both bodies' particles next to the joint
     assert set(sim.body[near]) == {0, 1}
 
@@ -115,17 +115,8 @@ def test_each_body_has_its_material_and_formulation():
     (lambda raw: raw.update(material={"model": "neo_hookean", "density": 1.0}), "remove the top-level [material]"),
     (lambda raw: raw["bodies"][1].update(name="steel"), "bodies[1].name must be a distinct identifier"),
     (lambda raw: [raw["bodies"][0].update(formulation={"type": "ulsph", "update_every": 3}),
-                  raw["bodies"][1]["formulation"].update(type="ulsph", update_every=5)],
-     "bodies[1].formulation.update_every = 5: the bodies with an updated reference update it together"),
-    (lambda raw: [raw["bodies"][0].update(formulation={"type": "ulsph", "update_every": 3}),
                   raw["bodies"][1]["formulation"].update(kernel="eulerian")],
      "all type = 'ulsph' or all kernel = 'eulerian'"),
-    (lambda raw: [raw["bodies"][1]["formulation"].update(type="ulsph", update_every=3),
-                  raw["bodies"][0]["material"].update(failure_strain=0.1, break_pairs=True)],
-     "bodies[0].material.break_pairs cannot be used in a scene with a body of type = 'ulsph'"),
-    (lambda raw: [raw["bodies"][0].update(formulation={"hessian": 0.3}),
-                  raw["bodies"][1]["formulation"].update(type="tlsph", hessian=0.5)],
-     "the bodies with Hessian stabilisation must share its value"),
     (lambda raw: raw["bodies"][0]["material"].pop("density"), "missing required key 'bodies[0].material.density'"),
     (lambda raw: raw["bodies"][1]["material"].update(shear_modulus=1.0),
      "bodies[1].material.shear_modulus does not apply"),

@@ -81,7 +81,7 @@ def acceleration_jump_at_update(correction):
     sim = simulation("punch_hessian", UL + ["formulation.update_every=3", "parameters.spacing=1e-3",
                                             f"formulation.hessian_correction={correction}"])
     run_until(sim, 0.8e-3)
-    sim.topology.every = 10**9  # updates by hand from here
+    sim.topology.relations[0].every = 10**9  # updates by hand from here
     sim.topology.update(sim)
     sim.step()
     n = sim.n_owned

@@ -268,7 +268,7 @@ def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     v = sim.v[:n].copy()
     ke = 0.5 * float(np.sum(sim.mass[:n, None] * v * v))
     return {"seconds": seconds, "steps": steps, "particles": n,
-            "neighbours": float(sim.ref.ptr[-1]) / n, "stable_dt": stable, "ke": ke,
+            "neighbours": float(sim.topology.relations[0].ref.ptr[-1]) / n, "stable_dt": stable, "ke": ke,
             "X": X.copy(), "x": X + sim.u[:n], "v": v, "mass": sim.mass[:n].copy()}
 
 

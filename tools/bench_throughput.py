@@ -100,7 +100,7 @@ def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"
         sim.step()
     seconds = time.perf_counter() - start
     n = sim.n_owned
-    pairs = int(sim.ref.ptr[-1])
+    pairs = int(sim.topology.relations[0].ref.ptr[-1])
     update = sim.stage_seconds.get("reference update", 0.0) / max(sim.topology.count, 1)
     if sim.contact:  # a contact search, timed alone
         x = sim.X[:n] + sim.u[:n]

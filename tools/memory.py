@@ -37,7 +37,7 @@ def main() -> None:
     scene = config.load(path, args.set)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     sim.step()
-    n, rows, pairs = sim.n_owned, len(sim.X), len(sim.ref.idx)
+    n, rows, pairs = sim.n_owned, len(sim.X), sim.topology.pair_count()
     found = arrays_held(sim)
     table = {"particle": [], "pair": [], "other": []}
     for name, a in found:

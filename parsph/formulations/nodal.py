@@ -113,7 +113,7 @@ class NodalFormulation:
         return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
 
     def build(self, sim, body, kernel: str, search: bool = True) -> None:
-        """Its relations: the particle pairs, which the loop's reference data holds."""
+        """Its relations: the particle pairs, which its kernel relation holds (parsph.kernel_relation)."""
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
         self.type = options["type"]
@@ -189,12 +189,12 @@ class NodalFormulation:
             out.append(Stage("kinematics+stress", hourglass_modulus, writes=("youngs",)))
         if hessian:
             def gradient():
-                ref = sim.ref
+                ref = body.relation.ref
                 self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, sim.d, sim.f)
             out.append(Stage("kinematics+stress", gradient, reads=("d",), writes=("f",)))
 
         def kinematics_stress():
-            ref = sim.ref
+            ref = body.relation.ref
             bad = self.kinematics_stress(
                 body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
                 sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
@@ -208,29 +208,30 @@ class NodalFormulation:
                          writes=("fs", "F", "VP", "J", "psi", "hg_psi") + trials))
         if hessian:
             def hessian_transpose():
-                ref = sim.ref
+                ref = body.relation.ref
                 self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.VP, sim.B)
             out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",), force_row=True))
 
         # MACHDYN's viscous hourglass force: alpha, the wave speed, density, E, the plastic strain's column
         constants = np.array([self.alpha, body.constants.wave_speed, body.density, body.constants.youngs,
                               body.law.plastic.strain if viscous else 0], float)
-        kind = KERNEL_NAMES.index(sim.scene["kernel"]["type"])
+        kind = KERNEL_NAMES.index(body.relation.kernel)
 
         def forces():
-            ref = sim.ref
+            ref = body.relation.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, fs, sim.VP, sim.B, sim.youngs,
                         sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.stable.bound_hourglass, sim.omega_hg2,
                         *force_scratch, sim.v, sim.material_state(body)[1] if viscous else sim.no_state,
                         sim.support, kind, constants)
-        reads = ("VP",) + (("d", "fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \
+        reads = ("VP",) + (("d", "fs" if self.updated else "F", "youngs") if hourglass else ()) + \
+            (("B",) if hessian else ()) + \
             (("v", body.law.state + "_trial") if viscous else ())
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2"), force_row=True))
         if any(self.viscosity):
             def viscosity():
-                ref = sim.ref
+                ref = body.relation.ref
                 tlsph.artificial_viscosity(
                     body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.d, sim.v, sim.J,
                     body.density, sim.volume_r if self.updated else sim.volume, sim.mass, sim.support,

@@ -26,6 +26,7 @@ from parsph.formulations import tlsph
 from parsph.kernels.correction import KeptPairs, reference_pairs, reverse_values
 from parsph.kernels.hessian import corrected_hessians
 from parsph.neighbors import find_pairs, within_bodies, without
+from parsph.relations import Relation
 
 
 @dataclass
@@ -63,6 +64,9 @@ class PairOptions:
     stabilised: bool = False
 
 
+NO_PAIRS = PairOptions(corrected=False, hourglass_form=0, alpha=0.0)  # a body another relation holds
+
+
 def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: str, body: np.ndarray,
           options: list, eta: float, weighted_hessian: bool, skin: float | None = None,
           kept: KeptPairs | None = None,
@@ -70,27 +74,39 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
           tolerant: bool = False) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
     and layer-1 ghosts) are built to provide the reverse coefficients g_ji. `body` is each
-    local particle's body index and options[b] its body's PairOptions; particles of
+    local particle's body index and options[b] its body's PairOptions, or None for a body
+    whose rows are left empty (another kernel relation holds them); particles of
     different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
     failed particles whose pairs are broken, materials.damage) of any, nor the pairs `cut`
     (neighbors.crossing: across a crack). The neighbours are
-    searched for, or, given a `skin` (an updated reference: no pair breaking), built by
-    KeptPairs on lists that much wider, which are kept (`kept`) until a particle has moved
-    half the skin: the same pairs in the same order. `tolerant`: owned rows left
-    with a singular correction matrix are listed in `bad` rather than raised."""
+    searched for, or, given a `skin` (an updated reference), built by KeptPairs on lists
+    that much wider, which are kept (`kept`) until a particle has moved half the skin: the
+    same pairs in the same order. The kept lists are filtered as the search is (KeptPairs
+    keeps its `detached` rows; given `detached`, `kept` is filtered again). `tolerant`:
+    owned rows left with a singular correction matrix are listed in `bad` rather than raised."""
+    members = np.array([o is not None for o in options])
+    options = [o or NO_PAIRS for o in options]
     corrected = np.array([o.corrected for o in options])
+    breaks = detached is not None and detached.any()
+    cut = np.zeros(0, np.int64) if cut is None else cut
     if skin is not None or kept is not None:
         if kept is None:
             candidates = find_pairs(X, support, gid, n_rows, skin)
             if len(options) > 1:
                 candidates = within_bodies(candidates, body)
+            if not members.all():
+                candidates = _rows_of(candidates, members[body[:n_rows]])
             kept = KeptPairs(candidates, X.shape[1], kernel, (eta, weighted_hessian) if eta > 0 else None)
-        return _rebuilt(kept, X, measure, volume, support, gid, n_owned, body, options)
+        if breaks:
+            kept = kept.without(detached, gid, cut)
+        return _rebuilt(kept, X, measure, volume, support, gid, n_owned, body, options, tolerant)
     pairs = find_pairs(X, support, gid, n_rows)
     if len(options) > 1:
         pairs = within_bodies(pairs, body)
-    if detached is not None and detached.any():
-        pairs = without(pairs, detached, gid, np.zeros(0, np.int64) if cut is None else cut)
+    if not members.all():
+        pairs = _rows_of(pairs, members[body[:n_rows]])
+    if breaks:
+        pairs = without(pairs, detached, gid, cut)
     ref = reference_pairs(X, measure, support, gid, pairs, kernel,
                           None if corrected.all() else corrected[body[:n_rows]],
                           None if detached is None else detached[:n_rows], tolerant)
@@ -145,13 +161,13 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
 
 
 def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np.ndarray,
-             options: list) -> ReferenceData:
+             options: list, tolerant: bool) -> ReferenceData:
     """The reference data of an updated reference from its KeptPairs (views of their arrays,
     rebuilt in place at the next update)."""
     rows = kept.candidates.n_rows
     plain = ~np.array([o.corrected for o in options])[body[:rows]]
     min_spacing, stiffening = np.empty(n), np.ones(n)
-    end = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening)
+    end, bad = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening, tolerant)
     dim = X.shape[1]
     ptr, idx, dx, w = kept.ptr[: n + 1], kept.idx[:end], kept.dx[:end], kept.w[:end]
     hgc = hreg = np.zeros(0)
@@ -170,4 +186,13 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
         q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
         q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),
         gh_rev=kept.gh_rev[:end] if stabilised else np.zeros(0), min_spacing=min_spacing, stiffening=stiffening,
-        kept=kept, bad=np.zeros(0, np.int64))
+        kept=kept, bad=bad)
+
+
+def _rows_of(pairs: Relation, rows: np.ndarray) -> Relation:
+    """`pairs` with only the `rows` (a bool per row) keeping theirs: pairs join particles of
+    one body, so the other rows are simply left empty."""
+    counts = np.where(rows, pairs.counts(), 0)
+    ptr = np.zeros(pairs.n_rows + 1, np.int64)
+    np.cumsum(counts, out=ptr[1:])
+    return Relation(ptr, pairs.idx[np.repeat(rows, pairs.counts())])

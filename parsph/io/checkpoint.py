@@ -4,8 +4,9 @@ A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the r
 configuration (positions, measures, volumes, masses, kernel supports, group membership),
 the state (displacement, velocity) and, in the updated formulation, the current reference
 (X^r, F^r, V^r); the checkpointed fields of any other point set (stress points) in a group
-of that name, in its global-id order; plus the clock (time, step, dt, reference updates), the accumulated
-energies, the output schedules and the resolved scene. It is written by all ranks together
+of that name, in its global-id order; the pairs cracks have cut (material.break_pairs); plus
+the clock (time, step, dt, reference updates), the accumulated energies, the output
+schedules and the resolved scene. It is written by all ranks together
 under a temporary name, made durable (fsync) and renamed, so a checkpoint either exists
 whole or not at all; the last K are kept.
 
@@ -123,7 +124,7 @@ def state_of(sim) -> dict:
                    "surface_torque": readouts.surface_torques(sim).tolist(),
                    "rigid": [body.state() for body in sim.rigid_bodies], **interactions.checkpoint(sim.interactions)},
         "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
-                  "updates": sim.topology.count, "since_update": sim.topology.since, "first_stable": sim.stable.first},
+                  **sim.topology.clock(), "first_stable": sim.stable.first},
     }
 
 
@@ -158,6 +159,10 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
                 for name, (set_gid, set_total, set_fields) in sets.items():
                     for field, rows in set_fields.items():
                         out.write_rows(f"{name}/{field}", set_gid, rows, set_total)
+                cut = sim.failure.cut
+                if cut is not None:  # the pairs cracks have cut (failure.Failure.crack), the same on every rank
+                    mine = cut if comm.rank == 0 else cut[:0]
+                    out.write_rows("cut_pairs", np.arange(len(mine)), mine, len(cut))
                 if out.writer:
                     attrs = out.file.attrs
                     attrs["format"] = FORMAT
@@ -228,6 +233,7 @@ def _read_block(path: str, comm) -> dict:
                 raise ValueError(f"is incomplete (dataset '{field}' missing or short)")
             fields[field] = f[field][start:stop]
         attrs["bodies"] = f.attrs.get("bodies", "null")
+        cut = f["cut_pairs"][:] if "cut_pairs" in f else None
         sets = {}
         for name, (count, names) in json.loads(f.attrs.get("sets", "{}")).items():
             start, stop = block_cuts(count, comm.size)[comm.rank: comm.rank + 2]
@@ -237,7 +243,7 @@ def _read_block(path: str, comm) -> dict:
                 if key not in f or len(f[key]) != count:
                     raise ValueError(f"is incomplete (dataset '{key}' missing or short)")
                 sets[name][field] = f[key][start:stop]
-    return {"attrs": attrs, "fields": fields, "sets": sets}
+    return {"attrs": attrs, "fields": fields, "sets": sets, "cut": cut}
 
 
 def read(path: str, comm) -> dict:
@@ -259,7 +265,8 @@ def read(path: str, comm) -> dict:
     _collective_check(comm, read_block)
     attrs = block[0]["attrs"]
     data = {"path": path, "fields": block[0]["fields"], "sets": block[0]["sets"], "scene": json.loads(attrs["scene"]),
-            "group_names": json.loads(attrs["groups"]), "offsets": json.loads(attrs["bodies"])}
+            "group_names": json.loads(attrs["groups"]), "offsets": json.loads(attrs["bodies"]),
+            "cut": block[0]["cut"]}
     for key in ("clock", "totals", "schedules"):
         data[key] = json.loads(attrs[key])
     return data

@@ -23,6 +23,7 @@ from numba import njit
 from parsph.errors import InputError
 from parsph.kernels.functions import KERNEL_NAMES, curvature, evaluate, value_and_slope
 from parsph.materials.elastic import det, inverse, right_cauchy_green, symmetric_extremes
+from parsph.neighbors import without
 from parsph.relations import Relation
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
@@ -210,8 +211,11 @@ class KeptPairs:
     from the corrected Hessians' row sums Hc_ij 1 = V_j (H_ij 1 - w_ij As_i X_ij),
     As_i = (sum_b C_i[:, b, :]) D_i^-1 (kernels.hessian), h_i = (l_i, ..., l_i)."""
 
-    def __init__(self, candidates: Relation, dim: int, kernel: str, hessian: tuple | None = None):
+    def __init__(self, candidates: Relation, dim: int, kernel: str, hessian: tuple | None = None,
+                 detached: np.ndarray | None = None):
         self.candidates = candidates
+        self.detached = detached  # rows without pairs (failed: materials.damage), as `without` left them
+        self.options = (dim, kernel, hessian)
         size, rows = len(candidates.idx), candidates.n_rows
         self.kind = KERNEL_NAMES.index(kernel)
         self.eta, weighted = hessian if hessian else (0.0, True)
@@ -228,25 +232,45 @@ class KeptPairs:
         self.As = np.empty((rows if self.eta > 0 else 0, dim, dim))
         self.q_sum = np.empty((rows if self.eta > 0 else 0, dim))
         self.report = np.zeros(3)
+        self.singular = np.zeros(rows, np.bool_)  # rows whose L_i the last rebuild found singular
         self.scratch = (np.empty((dim, dim)), np.empty((3, 3)), np.empty((dim, dim)), np.empty((dim, dim)))
 
+    def without(self, detached: np.ndarray, gid: np.ndarray, cut: np.ndarray) -> KeptPairs:
+        """These lists without the pairs of `detached` rows and the pairs `cut`
+        (neighbors.without: the filters formulations.reference.build applies to a search),
+        in new arrays."""
+        dim, kernel, hessian = self.options
+        return KeptPairs(without(self.candidates, detached, gid, cut), dim, kernel, hessian,
+                         detached[: self.candidates.n_rows].copy())
+
     def rebuild(self, positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
-                plain: np.ndarray, n_owned: int, min_spacing: np.ndarray, stiffening: np.ndarray) -> int:
+                plain: np.ndarray, n_owned: int, min_spacing: np.ndarray, stiffening: np.ndarray,
+                tolerant: bool = False) -> tuple:
         """Rebuild at `positions` (rows with `plain` take the plain SPH gradient, as in
-        reference_pairs); the nearest neighbour distance of the owned rows into
-        `min_spacing`, the stabilisation's stiffening into `stiffening`. Returns the number
-        of pairs of the owned rows; raises InputError on a position that is not a number,
-        coinciding particles or a singular L_i or Hessian correction."""
+        reference_pairs, and so do the `detached` rows); the nearest neighbour distance of
+        the owned rows into `min_spacing`, the stabilisation's stiffening into `stiffening`.
+        Returns the number of pairs of the owned rows and the owned rows with a singular
+        L_i (with `tolerant`, given the plain gradient as reference_pairs gives them);
+        raises InputError on a position that is not a number, coinciding particles or a
+        singular L_i (unless `tolerant`) or Hessian correction."""
         cand = self.candidates
         kept_rows, kept_gradients = self.passes
+        if self.detached is not None:
+            plain = plain | self.detached
         code = kept_rows(cand.ptr, cand.idx, positions, volume, support, self.kind, plain, n_owned, self.ptr,
                          self.idx, self.dx, self.w, self.h, self.slope, self.Hs, self.Linv, self.As, min_spacing,
-                         *self.scratch, self.report)
+                         *self.scratch, self.report, self.singular)
+        bad = np.zeros(0, np.int64)
+        if code == _SINGULAR and tolerant:
+            bad = np.flatnonzero(self.singular[:n_owned])
+            code = kept_rows(cand.ptr, cand.idx, positions, volume, support, self.kind, plain | self.singular,
+                             n_owned, self.ptr, self.idx, self.dx, self.w, self.h, self.slope, self.Hs, self.Linv,
+                             self.As, min_spacing, *self.scratch, self.report, self.singular)
         if code == _FINE:
             kept_gradients(n_owned, self.ptr, self.idx, self.dx, self.w, self.slope, volume, support, self.Linv,
                            self.Hs, self.As, self.eta, self.g, self.g_rev, self.g_sum, self.q, self.q_rev,
                            self.q_sum, self.gh, self.gh_rev, stiffening)
-            return int(self.ptr[n_owned])
+            return int(self.ptr[n_owned]), bad
         a, b, value = int(self.report[0]), int(self.report[1]), self.report[2]
         if code == _NOT_A_NUMBER:
             raise InputError(f"particles {int(gid[a])} and {int(gid[b])} have no finite distance "
@@ -297,16 +321,18 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
     code, whose branches on them are folded away."""
     @njit(cache=True, _nrt=False)
     def _kept_rows(cptr, cidx, X, volume, support, kind, plain, n_owned, ptr, idx, dx, w, hp, slope, Hs, Linv, As,
-                   min_spacing, L, M, D, Dinv, report):
+                   min_spacing, L, M, D, Dinv, report, singular):
         """KeptPairs.rebuild, first pass, row by row: the kept candidates (stored for the
         owned rows) with their kernel values and L_i, its condition number and inverse
         (and D_i, C_i summed over its middle index, As_i). report: (row, neighbour or count
-        of singular rows, condition). The sums of a row run in scalars: stores to arrays
-        that might alias would keep the compiler from holding them in registers."""
+        of singular rows, condition); `singular`: which rows' L_i is singular. The sums of a
+        row run in scalars: stores to arrays that might alias would keep the compiler from
+        holding them in registers."""
         k = 0
         first_bad, bad = -1, 0
         for i in range(len(cptr) - 1):
             owned = i < n_owned
+            singular[i] = False
             l00 = l01 = l02 = l11 = l12 = l22 = 0.0
             d00 = d01 = d02 = d11 = d12 = d22 = 0.0
             c00 = c01 = c02 = c10 = c11 = c12 = c20 = c21 = c22 = 0.0
@@ -412,6 +438,7 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                 if first_bad < 0:
                     first_bad, report[2] = i, cond
                 bad += 1
+                singular[i] = True
                 continue
             inverse(L, dim, Linv[i])
         if first_bad >= 0:

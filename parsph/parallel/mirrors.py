@@ -35,6 +35,7 @@ from mpi4py import MPI
 from parsph import fields as registry
 from parsph.errors import InputError, ParsphError
 from parsph.cells import kdtree
+from parsph.neighbors import pair_keys
 from parsph.parallel.decomposition import LocalBody
 
 
@@ -45,8 +46,17 @@ class Mirrors:
     start: int  # local row of the first layer-1 image
     source: np.ndarray  # local row of each layer-1 image's particle
     sign: np.ndarray  # (images, dim): the reflection, +1 or -1 per component
-    offset: np.ndarray  # (images, dim): a point p reflects to sign * p + offset
-    layer2: tuple  # the layer-2 images' (start, source, sign, offset), by local row
+    start2: int  # local row of the first layer-2 image
+    source2: np.ndarray  # local row of each layer-2 image's particle
+    offset: np.ndarray  # (images, dim): a layer-1 image's point p reflects to sign * p + offset
+    sign2: np.ndarray  # sign and offset of the layer-2 images
+    offset2: np.ndarray
+
+    def copy_all(self, arr: np.ndarray) -> None:
+        """Set the image rows of both layers of `arr` (a field reflection leaves as it is:
+        the damage state) to their sources' values, once the ghosts of both layers hold theirs."""
+        arr[self.start: self.start + len(self.source)] = arr[self.source]
+        arr[self.start2: self.start2 + len(self.source2)] = arr[self.source2]
 
     def fill(self, arr: np.ndarray, reflected: bool = True) -> None:
         """Set the layer-1 image rows of `arr` (scalars, vectors or tensors per particle)
@@ -61,7 +71,8 @@ class Mirrors:
         """Set the image rows of both layers of `arr`, the values of the registered `field`
         (parsph.fields), to their sources' reflected as its kind says (Field.reflect), or
         copied (`field` None: a material state): the images of a search, between searches."""
-        for start, source, sign, offset in ((self.start, self.source, self.sign, self.offset), self.layer2):
+        for start, source, sign, offset in ((self.start, self.source, self.sign, self.offset),
+                                            (self.start2, self.source2, self.sign2, self.offset2)):
             if len(source):
                 value = arr[source]
                 arr[start: start + len(source)] = value if field is None else field.reflect(value, sign, offset)
@@ -110,8 +121,7 @@ def add_images(local: LocalBody, position: str, planes: list, comm,
     for p in planes:
         plane_at[p["axis"]] = p["position"]
     source, sign, gid = [], [], []
-    subsets = [s for k in range(1, len(planes) + 1) for s in itertools.combinations(range(len(planes)), k)]
-    for k, subset in enumerate(subsets, start=1):
+    for k, subset in enumerate(_subsets(len(planes)), start=1):
         near = np.ones(len(x), bool)
         flip = np.ones(dim)
         for p in subset:
@@ -152,6 +162,27 @@ def add_images(local: LocalBody, position: str, planes: list, comm,
     owner = np.concatenate([local.owner[:n1], none, local.owner[n1:], np.full(len(layer2), -1, np.int64)])
     body = LocalBody(gid=merged["gid"], owner=owner, n_owned=n, n_ghost=local.n_ghost + len(layer1),
                      total=local.total, fields=merged)
-    source2 = source[layer2] + np.where(source[layer2] >= n1, len(layer1), 0)  # rows after the layer-1 images
-    second_plan = (len(merged["gid"]) - len(layer2), source2, sign[layer2], offset[layer2])
-    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), offset[layer1], second_plan)
+    source2 = np.where(source[layer2] < n1, source[layer2], source[layer2] + len(layer1))  # rows once merged
+    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), len(x) + len(layer1), source2,
+                         offset[layer1], sign[layer2], offset[layer2])
+
+
+def _subsets(planes: int) -> list:
+    """The combinations of the planes an image is reflected across, in the order of the
+    multiples of the particle count its global id adds (1, 2, ...)."""
+    return [s for k in range(1, planes + 1) for s in itertools.combinations(range(planes), k)]
+
+
+def reflected_pairs(keys: np.ndarray, total: int, planes: int) -> np.ndarray:
+    """The pairs `keys` (neighbors.pair_keys of global ids, images numbered as add_images
+    numbers them) with their reflections across every combination of the planes: what the
+    mirror images of a pair's particles make of it. Sorted, unique."""
+    masks = np.array([0] + [sum(1 << p for p in s) for s in _subsets(planes)])
+    image = np.empty(1 << planes, np.int64)  # the multiple of `total` of each combination
+    image[masks] = np.arange(len(masks))
+    a, b = keys >> 32, keys & 0xFFFFFFFF
+    out = [keys]
+    for mask in masks[1:]:
+        out.append(pair_keys(a % total + image[masks[a // total] ^ mask] * total,
+                             b % total + image[masks[b // total] ^ mask] * total))
+    return np.unique(np.concatenate(out))

@@ -41,8 +41,8 @@ def rows(sim):
     """gid -> (sorted neighbour gids, g, g_rev) for the owned particles."""
     out = {}
     for i in range(sim.n_owned):
-        p = slice(sim.ref.ptr[i], sim.ref.ptr[i + 1])
-        out[int(sim.gid[i])] = (sim.gid[sim.ref.idx[p]], sim.ref.g[p], sim.ref.g_rev[p])
+        p = slice(sim.topology.relations[0].ref.ptr[i], sim.topology.relations[0].ref.ptr[i + 1])
+        out[int(sim.gid[i])] = (sim.gid[sim.topology.relations[0].ref.idx[p]], sim.topology.relations[0].ref.g[p], sim.topology.relations[0].ref.g_rev[p])
     return out
 
 
