@@ -169,7 +169,7 @@ def test_quarter_with_kept_lists_moves_as_with_a_search_at_every_update(formulat
         sim = simulation(pressed_block(True, f"{formulation}\nsearch_every = {every}"))
         for _ in range(80):
             sim.step()
-        runs.append((sim.quantity("position"), sim.quantity("velocity"), sim.topology.rule.searches))
+        runs.append((sim.quantity("position"), sim.quantity("velocity"), sim.topology.relations[0].rule.searches))
     assert runs[0][2] == 80 and runs[1][2] < 10  # the lists were kept between searches
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
 
