@@ -933,9 +933,6 @@ def validate(raw: dict) -> dict:
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
             "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
-    if scene["symmetry"] and any(search_every(body["formulation"], True) > 1 for body in bodies(scene)):
-        raise InputError("[[symmetry]] planes with formulation.kernel = 'eulerian' or type = 'ulsph' need "
-                         "formulation.search_every = 1 (mirror images are made at each search)")
     for b, body in enumerate(bodies(scene)):
         FORMULATIONS[body["formulation"]["type"]].check_body(body, f"bodies[{b}]" if multi else "geometry", scene)
     if "contact" in raw:
@@ -949,7 +946,7 @@ def validate(raw: dict) -> dict:
 
 def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
     """The [[contact]] tables: two distinct bodies of the scene each, every pair once, one
-    radius per body, no symmetry planes."""
+    radius per body."""
     names = [b["name"] for b in bodies(scene)] if "bodies" in scene else []
     out, seen, radius = [], set(), {}
     for i, t in enumerate(_array("contact", raw)):
@@ -978,9 +975,6 @@ def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
                 raise InputError(f"{path}.radius = {item['radius']:g}: body '{name}' has contact radius "
                                  f"{radius[name]:g} in an earlier [[contact]]; give it one radius")
         out.append(item)
-    if out and scene["symmetry"]:
-        raise InputError("[[contact]] with [[symmetry]] planes is not supported: the mirror images do not "
-                         "take part in contact; model both sides")
     return out
 
 
@@ -989,11 +983,10 @@ def _kept_lists(form: dict) -> bool:
     return FORMULATIONS[form["type"]].moves_reference(form)
 
 
-def search_every(form: dict, symmetry: bool = False) -> int:
+def search_every(form: dict) -> int:
     """Reference updates between neighbour searches of a resolved formulation (1: it never
-    updates its reference, or searches at each update, as with `symmetry` planes unless
-    given: their mirror images are made at each search)."""
-    return form.get("search_every", 1 if symmetry else 30) if _kept_lists(form) else 1
+    updates its reference)."""
+    return form.get("search_every", 30) if _kept_lists(form) else 1
 
 
 def skin(form: dict) -> float:

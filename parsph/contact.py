@@ -49,6 +49,7 @@ contact distance plus s.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -96,9 +97,10 @@ class Contact:
         pass
 
     def __init__(self, specs: list, bodies: list, body: np.ndarray, measure: np.ndarray, mass: np.ndarray,
-                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm):
+                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm, planes: list = ()):
         """specs: the scene's [[contact]] tables; bodies: the simulation's bodies (names,
-        constants); body, measure, mass, gid: of the local particles (the owned first)."""
+        constants); body, measure, mass, gid: of the local particles (the owned first);
+        planes: the scene's [[symmetry]] planes."""
         n = n_owned
         index = {b.name: b.index for b in bodies}
         self.entries = [(index[s["bodies"][0]], index[s["bodies"][1]]) for s in specs]
@@ -142,6 +144,9 @@ class Contact:
         self.rule = Skin(self.skin, comm)  # when the lists are searched again
         self.self_contact = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
         self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
+        self.planes = list(planes)
+        self.total = comm.allreduce(n)  # the particles of all ranks: an image's id is its source's plus a multiple
+        self.images = None  # the mirror images' rows, sources and reflections (_mirror)
 
     def evaluate(self, x: np.ndarray, v: np.ndarray, step_limit: np.ndarray) -> None:
         """The contact forces, energies and spring bounds at the owned particles' current
@@ -158,6 +163,10 @@ class Contact:
         if self.dissipative:
             self._refresh(v, self.v)
             self.v[: self.n] = v
+        if self.images is not None:
+            self._reflect(self.x, True)
+            if self.dissipative:
+                self._reflect(self.v, False)
         _repulsion(self.n, self.ptr, self.idx, self.x, self.v, self.radius_all, self.modulus_all, self.mass_all,
                    self.inertia_all, self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt,
                    self.dim, self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2,
@@ -235,7 +244,7 @@ class Contact:
         sep = self.x[row] - self.x[i]
         ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (self.radius_all[row] + self.radius_all[i])
         k = int(np.argmin(ratio))
-        return int(self.gid_all[row[k]]), int(self.body_all[row[k]]), float(ratio[k])
+        return int(self.gid_all[row[k]] % self.total), int(self.body_all[row[k]]), float(ratio[k])
 
     def exclude(self, pairs, gid: np.ndarray) -> None:
         """The kernel's pairs (a relation of the owned rows; gid: the local rows' global ids),
@@ -281,6 +290,8 @@ class Contact:
         self.x[:n] = x
         self._refresh(x, self.x)
         points = np.concatenate([mine, np.arange(n, start)])
+        if self.planes:
+            points = np.concatenate([points, self._mirror(points, reach)])
         i, j = close_pairs(self.x[points], reach, self.body_all[points], self.entry_of >= 0)
         i, j = points[i], points[j]
         sep = self.x[j] - self.x[i]
@@ -299,6 +310,48 @@ class Contact:
         self.idx = j[order]
         self.ptr = np.zeros(n + 1, np.int64)
         np.cumsum(np.bincount(i, minlength=n), out=self.ptr[1:])
+
+    def _mirror(self, points: np.ndarray, reach: float) -> np.ndarray:
+        """Append the mirror images (parallel.mirrors) of the contact points `points` (rows
+        of self.x) within `reach` of the symmetry planes, across each plane and each
+        combination of planes near their corner, with their sources' constants, global ids
+        as parallel.mirrors numbers them (the kernel's pairs of a self-contact are known by
+        them) and reflected positions; return their rows. An image's force is not applied:
+        its source feels the mirrored force from the mirrored pair."""
+        x, dim, tol = self.x, self.dim, 1e-9 * self.distance
+        plane_at = np.zeros(dim)  # a point on every plane
+        for p in self.planes:
+            plane_at[p["axis"]] = p["position"]
+        source, sign, gid = [], [], []
+        for k, subset in enumerate((s for m in range(1, len(self.planes) + 1)
+                                    for s in itertools.combinations(range(len(self.planes)), m)), start=1):
+            near = np.ones(len(points), bool)
+            flip = np.ones(dim)
+            for p in subset:
+                gap = np.abs(x[points, self.planes[p]["axis"]] - self.planes[p]["position"])
+                near &= (gap > tol) & (gap < reach)
+                flip[self.planes[p]["axis"]] = -1.0
+            rows = points[near]
+            source.append(rows)
+            sign.append(np.broadcast_to(flip, (len(rows), dim)))
+            gid.append(self.gid_all[rows] + k * self.total)
+        source, sign = np.concatenate(source), np.concatenate(sign)
+        start = len(x)
+        self.images = (start, source, sign, (1.0 - sign) * plane_at)  # p reflects to sign * p + offset
+        self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all, self.inertia_all = (
+            np.concatenate([a, a[source] if k else np.concatenate(gid)]) for k, a in
+            enumerate((self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all,
+                       self.inertia_all)))
+        self.x = np.concatenate([x, np.zeros((len(source), dim))])
+        self.v = np.zeros((len(self.x) if self.dissipative else 0, dim))
+        self._reflect(self.x, True)
+        return np.arange(start, len(self.x))
+
+    def _reflect(self, into: np.ndarray, position: bool) -> None:
+        """The mirror images' rows of `into` (positions, or velocities if not `position`)
+        from their sources' rows."""
+        start, source, sign, offset = self.images
+        into[start:] = sign * into[source] + offset if position else sign * into[source]
 
     def _refresh(self, values: np.ndarray, into: np.ndarray) -> None:
         """The contact ghosts' rows of `into` (positions, velocities) from their owners'

@@ -47,7 +47,7 @@ def _contact(sim):
         return None
     from parsph import config  # config imports the interactions' keys
     contact = Contact(sim.scene["contact"], sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, sim.n_owned, sim.dim,
-                      config.thickness(sim.scene), sim.comm)
+                      config.thickness(sim.scene), sim.comm, sim.scene["symmetry"])
     return contact
 
 

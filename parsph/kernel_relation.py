@@ -61,7 +61,7 @@ class KernelRelation:
         schedule = (moving or bodies)[0]
         self.every, self.strain = schedule.formulation.update_every, schedule.formulation.update_strain
         kept = specs[schedule.index]["formulation"]
-        self.rule = Skin(config.skin(kept) * length, comm, config.search_every(kept, bool(scene["symmetry"])))
+        self.rule = Skin(config.skin(kept) * length, comm, config.search_every(kept))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
         self.count = 0
         self.since = 0
@@ -112,12 +112,11 @@ def groups(bodies: list, scene: dict) -> list:
     fits): one kernel type; one eta and hessian_correction among the stabilised bodies; one
     update schedule and list rule among the bodies whose reference moves."""
     specs = config.bodies(scene)
-    symmetry = bool(scene["symmetry"])
 
     def key(b):
         form, spec = b.formulation, specs[b.index]["formulation"]
         stabilised = (form.eta, form.weighted_hessian) if form.eta > 0 else None
-        schedule = (form.eulerian, form.update_every, form.update_strain, config.search_every(spec, symmetry),
+        schedule = (form.eulerian, form.update_every, form.update_strain, config.search_every(spec),
                     config.skin(spec)) if b.moves else None
         return config.kernel_of(scene, specs[b.index])["type"], stabilised, schedule
 

@@ -53,6 +53,13 @@ class PointSet:
         self.decomp.refresh(*(self.arrays[name] for name in names),
                             copied=[name.removesuffix("_trial") in self.states for name in names])
 
+    def refresh_all(self, *names: str) -> None:
+        """Copy the owners' values of the named carried fields into the rows of both ghost
+        layers and of the mirror images of both, reflected as their kinds say: the rows a
+        search would make, between searches (Decomposition.refresh_all)."""
+        self.decomp.refresh_all(*(self.arrays[name] for name in names),
+                                fields=[fields.get(name, self.name) for name in names])
+
     def commit(self) -> None:
         """The material state of the last stress evaluation (the fields NAME_trial) becomes
         the committed state of the owned points."""

@@ -84,7 +84,8 @@ def adopt(sim, local: LocalBody) -> None:
     updated = sim.updated and "Xr" in local.fields
     ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
     with collective(sim.comm):
-        local, mirrors = add_images(local, ref[0], sim.scene["symmetry"], sim.comm)
+        local, mirrors = add_images(local, ref[0], sim.scene["symmetry"], sim.comm,
+                                    skin=sim.topology.skin if sim.updated else 0.0)
         fl, n, dim = local.fields, local.n_owned, sim.dim
         # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
         layer2 = sim.topology.keeps or sim.failure.breaking

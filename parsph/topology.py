@@ -189,8 +189,7 @@ class Topology:
             points.refresh("Xr", "Fr")
         for name, value in self._new_reference(sim, moving).items():
             getattr(sim, name)[:n] = value
-        sim.decomp.refresh_all(*(sim.particles.arrays[name] for name in fields.migrating(sim.carried)
-                                 if name != "gid"))
+        sim.particles.refresh_all(*(name for name in fields.migrating(sim.carried) if name != "gid"))
         if sim.eulerian and everything:
             sim.shift[:] = sim.u  # d = 0 exactly (state.reference_shift)
         else:

@@ -420,12 +420,10 @@ def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body
     with pytest.raises(InputError, match="search_every must be > 0"):
         scene_from(block_2d(), ['formulation.type="sph"', 'formulation.kernel="eulerian"', "formulation.search_every=0"])
     text = block_2d() + "[[symmetry]]\naxis = 0\nposition = 0.0\n"
-    with pytest.raises(InputError, match="need formulation.search_every = 1"):
-        scene_from(text, ['formulation.type="sph"', 'formulation.kernel="eulerian"', "formulation.search_every=10"])
     for form in (['formulation.type="sph"', 'formulation.kernel="eulerian"'], ["formulation.type='ulsph'",
                                                                              "formulation.update_every=3"]):
-        scene = scene_from(text, form)  # with mirror images the lists are searched at each update
-        assert config.search_every(scene["formulation"], bool(scene["symmetry"])) == 1
+        scene = scene_from(text, form)  # with mirror images the lists are kept too
+        assert config.search_every(scene["formulation"]) == 30
     with pytest.raises(InputError, match="all type = 'ulsph' or all kernel = 'eulerian'"):
         scene_from("two_blocks", ['bodies.0.formulation.type="ulsph"', "bodies.0.formulation.update_every=1",
                                   'bodies.1.formulation.kernel="eulerian"'])

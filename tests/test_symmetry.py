@@ -1,5 +1,7 @@
 """Symmetry planes by mirror images (parallel.mirrors): a quarter of a symmetric body with two
-planes moves as the whole body does, in the total- and in the updated-Lagrangian formulation."""
+planes moves as the whole body does, in the total- and in the updated-Lagrangian formulation,
+with nodal EFG, with neighbour lists kept between searches, and in contact with another body
+(the images take part in contact)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from parsph.errors import InputError
-from physics import simulation
+from physics import run_until, simulation
 
 SPACING = 2.5e-4
 
@@ -62,6 +64,7 @@ velocity = [0.0, -1.0]
 @pytest.mark.parametrize("formulation", [
     'type = "tlsph"\nhourglass = 50.0',
     'type = "ulsph"\nupdate_every = 10\nhourglass = 50.0',
+    'type = "efg"\nkernel = "eulerian"',  # the MLS row data of the images reflected (kernels.shape)
 ])
 def test_quarter_with_two_planes_moves_as_the_whole_block(formulation):
     quarter = simulation(pressed_block(True, formulation))
@@ -73,7 +76,7 @@ def test_quarter_with_two_planes_moves_as_the_whole_block(formulation):
     for _ in range(150):
         quarter.step()
         whole.step()
-    if quarter.updated:
+    if quarter.updated and not quarter.eulerian:
         assert quarter.topology.count == whole.topology.count == 15
     scale = np.abs(whole.quantity("displacement")).max()
     assert scale > 1e-4  # the tools went 0.15 mm deep
@@ -103,3 +106,87 @@ def test_symmetry_planes_with_hessian_stabilisation_are_refused():
     the quarter with fixed normal components, reach 50 %)."""
     with pytest.raises(InputError, match="not symmetric under reflection"):
         simulation(pressed_block(True, 'type = "tlsph"\nhessian = 0.3'))
+
+
+PLATES_APART = ["bc.1.type=velocity", "bc.1.value=[0.0, 5.0]", "bc.0.value=[0.0, -5.0]"]  # both at 5 m/s
+
+
+def test_quarter_in_contact_with_its_plate_moves_as_the_whole_block_between_two_plates():
+    """runs/punch_hertz_quarter.toml against runs/punch_hertz.toml with both plates moving at
+    5 m/s, at 15 rows (0.2 mm): the block's and the plate's particles near the plane x = 3 mm
+    touch the mirror images of the other body's, and the quarter's particles (its middle row
+    on the plane y = 1.5 mm, held vertically) move as the whole block's to round-off; the
+    plate's contact force is half the whole model's."""
+    quarter = simulation("punch_hertz_quarter", ["parameters.spacing=2e-4"])
+    whole = simulation("punch_hertz", ["parameters.spacing=2e-4", *PLATES_APART])
+    gap, match = cKDTree(whole.quantity("reference_position")).query(quarter.quantity("reference_position"))
+    assert gap.max() < 1e-15
+    run_until(quarter, 1.5e-5, every=100)
+    run_until(whole, 1.5e-5, every=100)
+    scale = np.abs(whole.quantity("displacement")).max()
+    assert scale > 5e-5  # the plates went 0.15 mm deep together
+    assert np.abs(quarter.quantity("displacement") - whole.quantity("displacement", match)).max() < 1e-9 * scale
+    force = quarter.diagnostics()["contact_force_y.block.top"]
+    assert force < -1e4  # the plate presses on the block
+    assert force == pytest.approx(0.5 * whole.diagnostics()["contact_force_y.block.top"], rel=1e-8)
+
+
+@pytest.mark.mpi
+def test_quarter_in_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
+    """runs/punch_hertz_quarter.toml at 0.12 mm, 600 steps (the plate presses from the start):
+    the same history and final state bit for bit on 1 and 3 ranks, and a run checkpointed
+    on 2 ranks, restarted on 3, continues exactly; the plate's contact force is not zero."""
+    from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+    from parsph.io import read_history
+
+    scene = RUNS / "punch_hertz_quarter.toml"
+    coarse = ["--set", "parameters.spacing=1.2e-4", "--set", "time.max_steps=600",
+              "--set", "output.history_interval=0", "--set", "output.history_every=50"]
+    assert_same_on_ranks(scene, coarse, tmp_path / "quarter")
+    split = tmp_path / "split"
+    proc = parsph(["run", scene, "--out", split, "--quiet", *coarse, "--set", "time.max_steps=300",
+                   "--set", "output.checkpoint_every=300"], ranks=2)
+    assert proc.returncode == 0, proc.stderr
+    proc = parsph(["run", scene, "--out", split, "--quiet", *coarse, "--restart", "latest"], ranks=3)
+    assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(tmp_path / "quarter" / "ranks_1", split)
+    force = read_history(tmp_path / "quarter" / "ranks_1")["contact_force_y.block.top"]
+    assert force[-1] < -1e4
+
+
+KEPT = ['type = "ulsph"\nupdate_every = 1\nhourglass = 50.0', 'type = "sph"\nkernel = "eulerian"',
+        'type = "efg"\nkernel = "eulerian"']
+
+
+@pytest.mark.parametrize("formulation", KEPT)
+def test_quarter_with_kept_lists_moves_as_with_a_search_at_every_update(formulation):
+    """The pressed quarter in the updated reference at every step, or with the Eulerian
+    kernel: neighbour lists and mirror images searched with a skin at most every 30 updates
+    (images within the support plus the skin of a plane, refreshed reflected in between) give
+    the same positions and velocities, bit for bit, as a search at every update."""
+    runs = []
+    for every in (1, 30):
+        sim = simulation(pressed_block(True, f"{formulation}\nsearch_every = {every}"))
+        for _ in range(80):
+            sim.step()
+        runs.append((sim.quantity("position"), sim.quantity("velocity"), sim.topology.relations[0].rule.searches))
+    assert runs[0][2] == 80 and runs[1][2] < 10  # the lists were kept between searches
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("formulation", KEPT)
+def test_quarter_with_kept_lists_is_the_same_on_1_and_3_ranks(tmp_path, formulation):
+    """The same, 80 steps as runs: searching at every update on one rank and keeping the
+    lists for up to 30 updates on three give the same history and final state bit for bit."""
+    from conftest import assert_identical_outputs, parsph
+
+    outs = []
+    for every, ranks in ((1, 1), (30, 3)):
+        scene = tmp_path / f"kept_{every}.toml"
+        scene.write_text(pressed_block(True, f"{formulation}\nsearch_every = {every}")
+                         + "[output]\nhistory_every = 20\n")
+        outs.append(tmp_path / f"out_{every}")
+        proc = parsph(["run", scene, "--out", outs[-1], "--quiet", "--set", "time.max_steps=80"], ranks=ranks)
+        assert proc.returncode == 0, proc.stderr
+    assert_identical_outputs(*outs)

@@ -197,7 +197,8 @@ class GalerkinFormulation:
     def check_body(body: dict, where: str, scene: dict) -> None:
         """kbm places its stress points in the cells of a box lattice or of a polar ring
         (geometry.stress_points), efg with cell integration its Gauss points in cells over a
-        box lattice (geometry.gauss_points); neither has mirror images."""
+        box lattice (geometry.gauss_points); neither set has mirror images, so symmetry planes
+        are for nodal efg only."""
         form = body["formulation"]
         parts = body["parts"]
         what = {"kbm": "stress points in the cells of", "efg": "Gauss points in background cells over"}[form["type"]]
@@ -209,9 +210,10 @@ class GalerkinFormulation:
         if form["type"] == "efg" and form["integration"] == "cells" and not box:
             raise InputError(f"formulation.type = 'efg' places {what} one box lattice: "
                              f"{where}.parts must be a single box with placement = 'cell'")
-        if scene["symmetry"]:
-            raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' (its "
-                             "shape functions and integration points have no mirror images); model the whole body")
+        if scene["symmetry"] and integration_set(form):
+            raise InputError(f"[[symmetry]] planes cannot be used with formulation.type = '{form['type']}' with "
+                             f"{what.split(' in ')[0]} (they have no mirror images: only the particles have); use "
+                             "efg with nodal integration, or model the whole body")
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):  # failure: particle methods only
         self.type = options["type"]
@@ -266,7 +268,11 @@ class GalerkinFormulation:
                 A[key] = np.zeros((rows,) + data.shape[1:])
             rows_of_body = np.flatnonzero(active[: points.n_owned])
             A[key][rows_of_body] = data[rows_of_body]
-            points.refresh(key)
+            points.decomp.refresh(A[key], copied=[True])
+            mirrors = points.decomp.mirrors if name == "particles" else None
+            if mirrors is not None and len(mirrors.source):  # the images' row data, reflected
+                A[key][mirrors.start: mirrors.start + len(mirrors.source)] *= \
+                    kernel_shape.row_data_sign(self.shape, mirrors.sign)
             test = related("test", "particles", name, X[:n], Y, A["gid"], support, "rows", group_rows[:n],
                            np.where(active, 0, -2))
             if name == "particles":

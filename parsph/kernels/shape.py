@@ -38,6 +38,19 @@ def row_data_width(shape: str, dim: int) -> int:
     return 1 + dim if shape == "kbm" else 1 + m * m + dim * m
 
 
+def row_data_sign(shape: str, sign: np.ndarray) -> np.ndarray:
+    """The factors (points, row_data_width) that reflect the row data of points whose
+    positions reflect by `sign` (points, dim), +1 or -1 per component: kbm (S, grad S) as
+    (1, s); mls (l, M^-1, v) with the basis (1, (X_J - X_q) / l), which reflects by
+    D = (1, s), as (1, D_a D_b, s_c D_a) (M^-1 -> D M^-1 D, v_c = (d_c M) gamma -> s_c D v_c)."""
+    one = np.ones((len(sign), 1))
+    if shape == "kbm":
+        return np.concatenate([one, sign], axis=1)
+    D = np.concatenate([one, sign], axis=1)
+    return np.concatenate([one, (D[:, :, None] * D[:, None, :]).reshape(len(sign), -1),
+                           (sign[:, :, None] * D[:, None, :]).reshape(len(sign), -1)], axis=1)
+
+
 @njit(cache=True, inline="always")
 def _kernel(kind, xq, xJ, q, J, h, dim, grad):
     """W_J(X_q) with support h, its gradient with respect to X_q into grad."""

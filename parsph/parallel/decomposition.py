@@ -288,7 +288,8 @@ class Decomposition:
         if layer2 and size > 1:
             owner2 = local.owner[self.n_rows:]
             gid2 = local.gid[self.n_rows:]
-            self.recv_rows2 = {int(r): self.n_rows + np.flatnonzero(owner2 == r) for r in np.unique(owner2)}
+            self.recv_rows2 = {int(r): self.n_rows + np.flatnonzero(owner2 == r) for r in np.unique(owner2)
+                               if r >= 0}  # not the mirror images
             wanted = comm.alltoall([gid2[owner2 == r] for r in range(size)])
             self.send_index2 = {r: np.searchsorted(owned, gids) for r, gids in enumerate(wanted)
                                 if len(gids) and r != me}
@@ -306,11 +307,15 @@ class Decomposition:
             if self.mirrors is not None:
                 self.mirrors.fill(arr, reflected=not (k < len(copied) and copied[k]))
 
-    def refresh_all(self, *arrays: np.ndarray) -> None:
-        """refresh, and the layer-2 ghosts too (a Decomposition made with layer2)."""
-        for arr in arrays:
+    def refresh_all(self, *arrays: np.ndarray, fields=()) -> None:
+        """refresh, and the layer-2 ghosts too (a Decomposition made with layer2); then the
+        mirror images of both layers, reflected as the registered `fields` (parsph.fields,
+        one per array) say, or copied (no `fields`: material states)."""
+        for k, arr in enumerate(arrays):
             self._exchange(arr)
             self._exchange(arr, self.recv_rows2, self.send_index2)
+            if self.mirrors is not None:
+                self.mirrors.fill_all(arr, fields[k] if fields else None)
 
     def _exchange(self, arr: np.ndarray, recv=None, send=None) -> None:
         """Copy owners' values of `arr` into the ghost slots (MPI): layer 1, or the rows of

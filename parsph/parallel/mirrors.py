@@ -14,7 +14,14 @@ particle (owned or a layer-1 ghost) after each ghost exchange; layer-2 images co
 the layer-2 ghosts and only serve to build the layer-1 rows. An image's global id is its
 source's plus a multiple of the particle count, so sums over rows keep an order that does
 not depend on the rank count. A particle on a plane (within 1e-9 supports) has no image:
-hold its normal component with a fixed condition.
+hold its normal component with a fixed condition (its whole mass and energy then count in
+the part modelled, which holds half of it: the energy balance is off by that share).
+
+Neighbour lists kept between searches (ulsph, the Eulerian kernel: relations.Skin) get
+images within the reaches plus the skin, as their ghosts do, and between searches every
+image row of both layers is set from its source again (Mirrors.fill_all): the rows a
+search would make. Contact makes its own images of the contact particles near a plane
+(parsph.contact), with the same global ids.
 """
 
 from __future__ import annotations
@@ -34,13 +41,16 @@ from parsph.parallel.decomposition import LocalBody
 
 @dataclass
 class Mirrors:
-    """The layer-1 images of a rank's local arrays and how to refresh them."""
+    """The images of a rank's local arrays and how to refresh them."""
 
     start: int  # local row of the first layer-1 image
     source: np.ndarray  # local row of each layer-1 image's particle
     sign: np.ndarray  # (images, dim): the reflection, +1 or -1 per component
     start2: int  # local row of the first layer-2 image
     source2: np.ndarray  # local row of each layer-2 image's particle
+    offset: np.ndarray  # (images, dim): a layer-1 image's point p reflects to sign * p + offset
+    sign2: np.ndarray  # sign and offset of the layer-2 images
+    offset2: np.ndarray
 
     def copy_all(self, arr: np.ndarray) -> None:
         """Set the image rows of both layers of `arr` (a field reflection leaves as it is:
@@ -56,6 +66,16 @@ class Mirrors:
         value = arr[self.source]
         arr[self.start: self.start + len(self.source)] = \
             value if arr.ndim == 1 or not reflected else reflect(value, self.sign)
+
+    def fill_all(self, arr: np.ndarray, field) -> None:
+        """Set the image rows of both layers of `arr`, the values of the registered `field`
+        (parsph.fields), to their sources' reflected as its kind says (Field.reflect), or
+        copied (`field` None: a material state): the images of a search, between searches."""
+        for start, source, sign, offset in ((self.start, self.source, self.sign, self.offset),
+                                            (self.start2, self.source2, self.sign2, self.offset2)):
+            if len(source):
+                value = arr[source]
+                arr[start: start + len(source)] = value if field is None else field.reflect(value, sign, offset)
 
 
 def reflect(value: np.ndarray, sign: np.ndarray) -> np.ndarray:
@@ -82,17 +102,20 @@ def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
     return sides
 
 
-def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[LocalBody, Mirrors | None]:
+def add_images(local: LocalBody, position: str, planes: list, comm,
+               skin: float = 0.0) -> tuple[LocalBody, Mirrors | None]:
     """`local` with the mirror images across `planes` (scene["symmetry"]) of its particles
-    in the configuration `fields[position]` added as two layers; and their refresh plan
-    (None without planes)."""
+    in the configuration `fields[position]` added as two layers, with reaches extended by
+    `skin` (lists kept between searches, as the ghosts of add_ghosts); and their refresh
+    plan (None without planes)."""
     if not planes:
         return local, None
     fields, n, n1 = local.fields, local.n_owned, local.n_owned + local.n_ghost
     x = fields[position]
     dim = x.shape[1]
-    reach = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
-    tol = 1e-9 * reach
+    support = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
+    tol = 1e-9 * support
+    reach = support + skin
     sides = body_sides(x[:n], planes, tol, comm)
     plane_at = np.zeros(dim)  # a point on every plane
     for p in planes:
@@ -140,7 +163,8 @@ def add_images(local: LocalBody, position: str, planes: list, comm) -> tuple[Loc
     body = LocalBody(gid=merged["gid"], owner=owner, n_owned=n, n_ghost=local.n_ghost + len(layer1),
                      total=local.total, fields=merged)
     source2 = np.where(source[layer2] < n1, source[layer2], source[layer2] + len(layer1))  # rows once merged
-    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), len(x) + len(layer1), source2)
+    return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), len(x) + len(layer1), source2,
+                         offset[layer1], sign[layer2], offset[layer2])
 
 
 def _subsets(planes: int) -> list:
