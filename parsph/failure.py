@@ -6,6 +6,8 @@ pairs they cut, with the reference data built again without them: cracks open.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from mpi4py import MPI
 
@@ -17,6 +19,17 @@ from parsph.materials import damage
 from parsph.neighbors import crossing, find_pairs
 from parsph.parallel.mirrors import reflected_pairs
 from parsph.parallel.runtime import collective
+
+
+@dataclass
+class Broken:
+    """What the state held before pairs broke: the hourglass penalty, the intact laws' work,
+    the damage work column and the owned particles' F."""
+
+    penalty: np.ndarray
+    held: np.ndarray
+    work: np.ndarray
+    F: np.ndarray
 
 
 class Failure:
@@ -96,18 +109,14 @@ class Failure:
         if sim.decomp.mirrors is not None:
             sim.decomp.mirrors.copy_all(state)
 
-    def break_pairs(self, sim) -> None:
+    def break_pairs(self, sim) -> Broken | None:
         """Particles that have failed since the last call lose their pairs (collective): the
         reference data is built again without them (materials.damage: cracks open), in the
         reference it is built in (X, or X^r when updated; on the kept lists if any), and
         again while it leaves a particle with a singular correction matrix (a particle cut
-        off from its body: it fails too). The forces are evaluated on the new pairs; the
-        change of F this makes does no work (the particles do not move): an elasto-plastic
-        particle keeps its elastic state (its plastic metric takes the change), an elastic
-        one's stress changes, and the strain energy it releases counts as damage work (a
-        damaged particle's work W is kept; an intact one's release is added to the ledger's
-        damage_released), and the hourglass penalty it drops as released (the balance
-        stays closed)."""
+        off from its body: it fails too). Returns what the state held before (None: no pair
+        broke), for keep_elastic and settle once the loop has evaluated the forces on the
+        new pairs."""
         n = sim.n_owned
         state, trial = sim.particles.arrays["damage"], sim.particles.arrays["damage_trial"]
         new = self.failed(state[:n], sim.body) & ~self.detached[:n]
@@ -135,19 +144,28 @@ class Failure:
             state[bad, damage.DAMAGE] = trial[bad, damage.DAMAGE] = 1.0
         self.detached = detached  # the stages read their relation's reference data when they run
         sim.exclude_kernel_pairs()
-        penalty = sim.hg_psi.copy()
-        held = intact_law_work(sim)
-        work = state[:, damage.WORK].copy()
-        F_old = sim.F[:n].copy()
-        sim.compute_forces()
+        return Broken(sim.hg_psi.copy(), intact_law_work(sim), state[:, damage.WORK].copy(), sim.F[:n].copy())
+
+    @staticmethod
+    def keep_elastic(sim, broken: Broken) -> bool:
+        """After the forces on the new pairs: an elasto-plastic particle keeps its elastic
+        state (stress), its plastic metric taking the change of F; returns whether a body
+        did (the forces are then evaluated again)."""
         plastic = [b for b in sim.bodies if b.law.plastic and not b.rigid]
-        for b in plastic:  # their elastic state (stress) is kept: the plastic metric takes the change of F
-            b.law.plastic.keep_elastic(sim.material_state(b)[0][b.lo:b.hi], F_old[b.lo:b.hi], sim.F[b.lo:b.hi])
-        if plastic:
-            sim.compute_forces()
-        sim.ledger.add("hourglass_released", penalty[:n] - sim.hg_psi[:n])
-        sim.ledger.add("damage_released", held - intact_law_work(sim))
-        trial[:, damage.WORK] = work
+        for b in plastic:
+            b.law.plastic.keep_elastic(sim.material_state(b)[0][b.lo:b.hi], broken.F[b.lo:b.hi], sim.F[b.lo:b.hi])
+        return bool(plastic)
+
+    def settle(self, sim, broken: Broken) -> None:
+        """The change of F the broken pairs made does no work (the particles do not move): an
+        elastic particle's released strain energy counts as damage work (a damaged particle's
+        work W is kept; an intact one's release is added to the ledger's damage_released),
+        the hourglass penalty it drops as released (the balance stays closed); the state is
+        committed."""
+        n = sim.n_owned
+        sim.ledger.add("hourglass_released", broken.penalty[:n] - sim.hg_psi[:n])
+        sim.ledger.add("damage_released", broken.held - intact_law_work(sim))
+        sim.particles.arrays["damage_trial"][:, damage.WORK] = broken.work
         for points in sim.point_sets():
             points.commit()
         self.find_broken(sim)

@@ -212,7 +212,7 @@ class Simulation:
         self.ledger.give_heat(self)
         self.failure.advance(self, dt)
         if self.failure.breaking:
-            self.failure.break_pairs(self)
+            self._break_pairs()
         if self.contact is not None and self.contact.dissipative:  # friction's limit
             self.contact.dt = dt
         self.ledger.begin(self)
@@ -248,11 +248,31 @@ class Simulation:
             self.stage_seconds["stable step"] += time.perf_counter() - clock
             due = self.topology.due(strains)
         if due:
-            self.topology.update(self, due)
+            self.update_reference(due)
             clock = time.perf_counter()
             self.stable.dt = self.stable.next_step(self)[0]
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
+
+    def update_reference(self, due: list | None = None) -> None:
+        """Make the current configuration the reference [V §3.1] of the `due` kernel
+        relations' bodies (None: of every body whose reference moves) between steps
+        (topology.Topology.move) and evaluate the forces in it."""
+        self.topology.move(self, [r for r in self.topology.relations if r.moves] if due is None else due)
+        self.compute_forces()
+        self.ledger.external = external_force(self)
+
+    def _break_pairs(self) -> None:
+        """Pairs of newly failed particles break (failure.Failure.break_pairs) and the forces
+        are evaluated on the new pairs, twice where a plastic body keeps its elastic state
+        through the change of F; the change does no work (failure.Failure.settle)."""
+        broken = self.failure.break_pairs(self)
+        if broken is None:
+            return
+        self.compute_forces()
+        if self.failure.keep_elastic(self, broken):
+            self.compute_forces()
+        self.failure.settle(self, broken)
 
     @property
     def dt(self) -> float:

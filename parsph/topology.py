@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from parsph import conditions, fields, state
+from parsph import fields, state
 from parsph.collocation import BoundaryCollocation
 from parsph.errors import InputError, ParsphError
 from parsph.kernel_relation import Configuration, KernelRelation, groups, reach
@@ -104,14 +104,6 @@ class Topology:
 
     def pair_count(self) -> int:
         return sum(len(r.ref.idx) for r in self.relations)
-
-    def update(self, sim, due: list | None = None) -> None:
-        """Make the current configuration the reference [V §3.1] of the `due` relations'
-        bodies (None: of every body whose reference moves) between steps (move) and evaluate
-        the forces in it."""
-        self.move(sim, [r for r in self.relations if r.moves] if due is None else due)
-        sim.compute_forces()
-        sim.ledger.external = conditions.external_force(sim)
 
     def move(self, sim, due: list | None = None) -> bool:
         """Make the current configuration the reference [V §3.1] of the `due` relations'
