@@ -132,7 +132,7 @@ def global_parts(state, reduction: RowReduction):
     reduced."""
     dim = state.dim
     eta = readouts.disorder(state)
-    columns = particle_columns(state.mass, state.v, state.X, state.u, eta)
+    columns = particle_columns(state.ledger.masses(state), state.v, state.X, state.u, eta)
     energies = state.ledger.items(state)
     bodies = state.bodies
     start = reduction.add_sums([columns])

@@ -81,7 +81,7 @@ def energies(sim, b) -> dict:
             if interaction is None or not term.shown(sim):
                 out[term.key] = []
             elif k == 0:
-                out[term.key] = [interaction.energy[b.lo:b.hi]]
+                out[term.key] = [sim.ledger.part(b, interaction.energy[b.lo:b.hi])]
             else:
                 out[term.key] = [sim.ledger.totals[term.key][b.index].sums()[0]]
     return out

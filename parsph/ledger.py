@@ -67,11 +67,26 @@ class Ledger:
         self.totals = {name: [Accumulator() for _ in bodies] for name in RUNNING}
         self.external = None  # body force, tractions and reactions at the current state
         self._start = None
+        self.share = None  # each owned particle's share in the part modelled (parallel.mirrors.on_planes; None: 1)
 
     def add(self, name: str, values: np.ndarray) -> None:
         """Add each body's rows of per-particle `values` (owned rows) to running total `name`."""
         for b in self.bodies:
-            self.totals[name][b.index].add(values[b.lo:b.hi])
+            self.totals[name][b.index].add(self.part(b, values[b.lo:b.hi]))
+
+    def part(self, b, values: np.ndarray) -> np.ndarray:
+        """Per-particle `values` of body `b`'s owned rows, each weighted by the particle's
+        share in the part modelled (1/2 on a symmetry plane: parallel.mirrors.on_planes).
+        Arrays of other points (an empty penalty; KBM's and EFG's integration points, which
+        take no planes) are as given."""
+        if self.share is None or len(values) != b.hi - b.lo:
+            return values
+        share = self.share[b.lo:b.hi]
+        return values * (share if values.ndim == 1 else share.reshape((-1,) + (1,) * (values.ndim - 1)))
+
+    def masses(self, sim) -> np.ndarray:
+        """The particles' masses as the sums of the balance count them (by their share)."""
+        return sim.mass if self.share is None else sim.mass[: sim.n_owned] * self.share
 
     def restore(self, carried: dict) -> None:
         """The global totals of a checkpoint (rank 0 carries them); a total the checkpoint
@@ -223,13 +238,13 @@ class Ledger:
         for b in sim.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            out["strain"].append([b.formulation.integrated(sim, b, lambda A: A["psi"])])
-            out["plastic"].append([] if not b.law.plastic else [b.formulation.integrated(
-                sim, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work])])
-            out["damage"].append([] if not b.failure else [sim.volume[lo:hi] * _damage_work(sim, b),
+            out["strain"].append([self.part(b, b.formulation.integrated(sim, b, lambda A: A["psi"]))])
+            out["plastic"].append([] if not b.law.plastic else [self.part(b, b.formulation.integrated(
+                sim, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work]))])
+            out["damage"].append([] if not b.failure else [self.part(b, sim.volume[lo:hi] * _damage_work(sim, b)),
                                                            acc["damage_released"]])
             out["viscous"].append([acc["viscous_work"]])
-            out["hourglass"].append([sim.hg_psi[lo:hi], acc["hourglass_work"], acc["hourglass_released"]])
+            out["hourglass"].append([self.part(b, sim.hg_psi[lo:hi]), acc["hourglass_work"], acc["hourglass_released"]])
             out["damping"].append([acc["damping_work"]])
             out["external"].append([acc["external_work"]])
             for key, parts in interactions.energies(sim, b).items():

@@ -90,6 +90,7 @@ def adopt(sim, local: LocalBody) -> None:
         # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
         layer2 = sim.topology.keeps or sim.failure.breaking
         sim.decomp = Decomposition(local, sim.comm, mirrors, layer2=layer2)
+        sim.ledger.share = mirrors.share if mirrors else None  # particles on a plane count by their share
         body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
         sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
         cut = sim.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, sim.failure.detached,

@@ -116,7 +116,8 @@ def test_quarter_in_contact_with_its_plate_moves_as_the_whole_block_between_two_
     5 m/s, at 15 rows (0.2 mm): the block's and the plate's particles near the plane x = 3 mm
     touch the mirror images of the other body's, and the quarter's particles (its middle row
     on the plane y = 1.5 mm, held vertically) move as the whole block's to round-off; the
-    plate's contact force is half the whole model's."""
+    plate's contact force is half the whole model's, and the energies a quarter of the
+    whole's: the middle row counts by its share (half) in the balance, which closes."""
     quarter = simulation("punch_hertz_quarter", ["parameters.spacing=2e-4"])
     whole = simulation("punch_hertz", ["parameters.spacing=2e-4", *PLATES_APART])
     gap, match = cKDTree(whole.quantity("reference_position")).query(quarter.quantity("reference_position"))
@@ -126,9 +127,13 @@ def test_quarter_in_contact_with_its_plate_moves_as_the_whole_block_between_two_
     scale = np.abs(whole.quantity("displacement")).max()
     assert scale > 5e-5  # the plates went 0.15 mm deep together
     assert np.abs(quarter.quantity("displacement") - whole.quantity("displacement", match)).max() < 1e-9 * scale
-    force = quarter.diagnostics()["contact_force_y.block.top"]
+    rows = quarter.diagnostics()
+    whole_rows = whole.diagnostics()
+    force = rows["contact_force_y.block.top"]
     assert force < -1e4  # the plate presses on the block
-    assert force == pytest.approx(0.5 * whole.diagnostics()["contact_force_y.block.top"], rel=1e-8)
+    assert force == pytest.approx(0.5 * whole_rows["contact_force_y.block.top"], rel=1e-8)
+    for key in ("kinetic_energy", "strain_energy", "total_energy"):
+        assert rows[key] > 0.0 and rows[key] == pytest.approx(0.25 * whole_rows[key], rel=1e-7), key
 
 
 @pytest.mark.mpi

@@ -14,8 +14,9 @@ particle (owned or a layer-1 ghost) after each ghost exchange; layer-2 images co
 the layer-2 ghosts and only serve to build the layer-1 rows. An image's global id is its
 source's plus a multiple of the particle count, so sums over rows keep an order that does
 not depend on the rank count. A particle on a plane (within 1e-9 supports) has no image:
-hold its normal component with a fixed condition (its whole mass and energy then count in
-the part modelled, which holds half of it: the energy balance is off by that share).
+hold its normal component with a fixed condition; half of it belongs to the other side, so
+it counts by its share (1/2 for each plane it lies on: Mirrors.share) in the sums of the
+energy balance (parsph.ledger), as the particles of the whole body would.
 
 Neighbour lists kept between searches (ulsph, the Eulerian kernel: relations.Skin) get
 images within the reaches plus the skin, as their ghosts do, and between searches every
@@ -51,6 +52,7 @@ class Mirrors:
     offset: np.ndarray  # (images, dim): a layer-1 image's point p reflects to sign * p + offset
     sign2: np.ndarray  # sign and offset of the layer-2 images
     offset2: np.ndarray
+    share: np.ndarray | None = None  # each owned particle's share of itself in the part modelled (on_planes)
 
     def copy_all(self, arr: np.ndarray) -> None:
         """Set the image rows of both layers of `arr` (a field reflection leaves as it is:
@@ -164,7 +166,16 @@ def add_images(local: LocalBody, position: str, planes: list, comm,
                      total=local.total, fields=merged)
     source2 = np.where(source[layer2] < n1, source[layer2], source[layer2] + len(layer1))  # rows once merged
     return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), len(x) + len(layer1), source2,
-                         offset[layer1], sign[layer2], offset[layer2])
+                         offset[layer1], sign[layer2], offset[layer2], on_planes(x[:n], planes, tol))
+
+
+def on_planes(x: np.ndarray, planes: list, tol: float) -> np.ndarray | None:
+    """Each particle's share of itself in the part modelled: 1/2 for each plane it lies on
+    (within `tol`: it has no image), or None where none lies on one."""
+    share = np.ones(len(x))
+    for p in planes:
+        share[np.abs(x[:, p["axis"]] - p["position"]) <= tol] *= 0.5
+    return share if (share < 1.0).any() else None
 
 
 def _subsets(planes: int) -> list:
