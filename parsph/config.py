@@ -939,26 +939,33 @@ def validate(raw: dict) -> dict:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
     if "ties" in raw:
         entries = [_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))]
+        for i, entry in enumerate(entries):
+            _body_pair(f"ties[{i}]", entry["bodies"], scene)
         scene["ties"] = ties.check(entries, scene, bodies(scene), moves)
     scene["parameters"] = dict(raw.get("parameters", {}))
     return scene
 
 
+def _body_pair(path: str, pair: list, scene: dict) -> None:
+    """`path`.bodies (contact, ties) names two bodies of the scene."""
+    names = [b["name"] for b in bodies(scene)] if "bodies" in scene else []
+    if len(pair) != 2:
+        raise InputError(f"{path}.bodies must name two bodies, got {pair!r}")
+    for name in pair:
+        if name not in names:
+            raise InputError(f"{path}.bodies names body '{name}', which is not defined"
+                             f"{_suggest(name, names) if names else ' (it needs [[bodies]])'}")
+
+
 def _validate_contact(raw: Any, scene: dict, dim: int) -> list:
     """The [[contact]] tables: two distinct bodies of the scene each, every pair once, one
     radius per body."""
-    names = [b["name"] for b in bodies(scene)] if "bodies" in scene else []
     out, seen, radius = [], set(), {}
     for i, t in enumerate(_array("contact", raw)):
         path = f"contact[{i}]"
         item = _table(path, t, CONTACT_KEYS, dim)
         pair = item["bodies"]
-        if len(pair) != 2:
-            raise InputError(f"{path}.bodies must name two bodies, got {pair!r}")
-        for name in pair:
-            if name not in names:
-                raise InputError(f"{path}.bodies names body '{name}', which is not defined"
-                                 f"{_suggest(name, names) if names else ' (contact needs [[bodies]])'}")
+        _body_pair(path, pair, scene)
         if (pair[0] == pair[1]) != item["self_contact"]:
             raise InputError(f"{path}.bodies: contact of body '{pair[0]}' with itself needs {path}.self_contact = "
                              "true" if pair[0] == pair[1] else

@@ -364,6 +364,17 @@ class Contact:
         MPI.Request.Waitall(requests)
 
 
+@njit(cache=True, inline="always")
+def clear_row(i, force, dissipation, entry_force):
+    """Row i of an interaction's force, its dissipative part (if kept) and each entry's force: 0."""
+    for a in range(force.shape[1]):
+        force[i, a] = 0.0
+        if len(dissipation):
+            dissipation[i, a] = 0.0
+        for k in range(entry_force.shape[0]):
+            entry_force[k, i, a] = 0.0
+
+
 @njit(cache=True, _nrt=False)
 def _repulsion(n, ptr, idx, x, v, radius, modulus, mass, inertia, body, entry_of, factor, zeta, friction, dt, dim,
                scale, skin, force, dissipation, energy, omega2, entry_force, closest):
@@ -375,12 +386,7 @@ def _repulsion(n, ptr, idx, x, v, radius, modulus, mass, inertia, body, entry_of
     pair's force moves, Contact.inertia); the pairs' forces summed in the rows'
     order (global ids)."""
     for i in range(n):
-        for a in range(dim):
-            force[i, a] = 0.0
-            if len(dissipation):
-                dissipation[i, a] = 0.0
-            for k in range(entry_force.shape[0]):
-                entry_force[k, i, a] = 0.0
+        clear_row(i, force, dissipation, entry_force)
         energy[i] = 0.0
         omega2[i] = 0.0
         closest[i] = 1.0

@@ -47,6 +47,7 @@ from numba import njit
 
 from parsph.balance import Term
 from parsph.cells import close_pairs
+from parsph.contact import clear_row
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, in_range, non_negative, positive
 from parsph.neighbors import pair_keys
@@ -78,20 +79,14 @@ RUNNING = ("tie_released",  # the tie energy broken ties released
 
 
 def check(entries: list, scene: dict, bodies: list, moves) -> list:
-    """The validated [[ties]] tables (`entries`, keys filled in): two distinct bodies of the
-    scene each (`bodies`, resolved), total-Lagrangian (`moves(body)` false) and not rigid,
-    every pair once, no symmetry planes."""
+    """The validated [[ties]] tables (`entries`, keys filled in, each naming two bodies of the
+    scene: config): distinct bodies (`bodies`, resolved), total-Lagrangian (`moves(body)`
+    false) and not rigid, every pair once, no symmetry planes."""
     names = [b["name"] for b in bodies]
     seen = set()
     for i, item in enumerate(entries):
         path = f"ties[{i}]"
         pair = item["bodies"]
-        if len(pair) != 2:
-            raise InputError(f"{path}.bodies must name two bodies, got {pair!r}")
-        for name in pair:
-            if name not in names:
-                raise InputError(f"{path}.bodies names body '{name}', which is not defined (the scene's bodies: "
-                                 f"{', '.join(names)})")
         if pair[0] == pair[1]:
             raise InputError(f"{path}.bodies: body '{pair[0]}' is tied to itself; a tie joins two bodies")
         if frozenset(pair) in seen:
@@ -267,12 +262,7 @@ def _tie(n, ptr, idx, first, u, v, normal, area, k_n, k_t, strength, reduced, ze
     dim = u.shape[1]
     broke = False
     for i in range(n):
-        for a in range(dim):
-            force[i, a] = 0.0
-            if len(dissipation):
-                dissipation[i, a] = 0.0
-            for k in range(entry_force.shape[0]):
-                entry_force[k, i, a] = 0.0
+        clear_row(i, force, dissipation, entry_force)
         energy[i] = 0.0
         omega2[i] = 0.0
         released[i] = 0.0
