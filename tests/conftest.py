@@ -161,6 +161,20 @@ def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> list:
     return outs
 
 
+def run_on_ranks(scene, out_dir, ranks=(1, 3)) -> list:
+    """Run `parsph run SCENE` on each rank count (outputs under out_dir); returns each run's
+    (last snapshot's fields, history)."""
+    from parsph.io import read_history, read_snapshots
+
+    results = []
+    for n in ranks:
+        out = Path(out_dir) / f"ranks_{n}"
+        proc = parsph(["run", scene, "--out", out, "--quiet"], ranks=n)
+        assert proc.returncode == 0, proc.stderr
+        results.append((read_snapshots(out, which=-1)[0].fields, read_history(out)))
+    return results
+
+
 def assert_it_happened(out, ranks: int = 1) -> None:
     """The guard of a comparison of runs: the run in `out` took steps and moved its particles
     (kinetic energy in its history, a displacement in its last snapshot where written) and,

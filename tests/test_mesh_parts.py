@@ -15,13 +15,12 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import ROOT, parsph
+from conftest import ROOT, parsph, run_on_ranks
 from parsph import config
 from parsph.build import build_bodies
 from parsph.errors import InputError
 from parsph.geometry import lattice
 from parsph.geometry.mesh_parts import MeshPart
-from parsph.io import read_history, read_snapshots
 from physics import soft_solid
 
 # (VTK / meshio node order) each element type as tetrahedra of its nodes, for exact moments
@@ -389,13 +388,7 @@ def test_a_mesh_scene_is_the_same_on_1_and_3_ranks(tmp_path):
     with open(path, "a") as fh:
         fh.write('[[bc]]\ntype = "fixed"\ngroup = "held"\n[[bc]]\ntype = "velocity"\ngroup = "pulled"\n'
                  'value = [1.0, 0.0, 0.0]\nramp = 1.0e-4\n')
-    results = []
-    for n in (1, 3):
-        out = tmp_path / f"r{n}"
-        proc = parsph(["run", path, "--out", out, "--quiet"], ranks=n)
-        assert proc.returncode == 0, proc.stderr
-        results.append((read_snapshots(out, which=-1)[0].fields, read_history(out)))
-    (one, h1), (three, h3) = results
+    (one, h1), (three, h3) = run_on_ranks(path, tmp_path)
     assert np.array_equal(one["gid"], np.arange(len(cells))) and np.array_equal(three["gid"], one["gid"])
     for field in ("position", "velocity", "J"):
         assert np.array_equal(one[field], three[field]), field

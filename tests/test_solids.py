@@ -360,8 +360,7 @@ def test_a_packed_surface_scene_is_the_same_on_1_and_3_ranks(tmp_path, meshes):
 def test_a_run_of_a_body_filled_from_an_stl_is_the_same_on_1_and_3_ranks(tmp_path, meshes):
     """A ball filled from the STL icosphere, its lower cap held and the rest set moving:
     the particles and the whole history of 20 steps bit for bit the same on 1 and 3 ranks."""
-    from conftest import parsph
-    from parsph.io import read_history, read_snapshots
+    from conftest import run_on_ranks
     import shutil
     shutil.copy(meshes["folder"] / "ico.stl", tmp_path / "ico.stl")
     scene = tmp_path / "ball.toml"
@@ -391,13 +390,7 @@ expression = ["y", "-x", "z"]
 type = "fixed"
 group = "cap"
 """)
-    results = []
-    for n in (1, 3):
-        out = tmp_path / f"run{n}"
-        proc = parsph(["run", scene, "--out", out, "--quiet"], ranks=n)
-        assert proc.returncode == 0, proc.stderr
-        results.append((read_snapshots(out, which=-1)[0].fields, read_history(out)))
-    (one, h1), (three, h3) = results
+    (one, h1), (three, h3) = run_on_ranks(scene, tmp_path)
     assert len(one["gid"]) > 200 and np.array_equal(one["gid"], three["gid"])
     assert h1["step"][-1] == 20 and h1["kinetic_energy"][-1] != h1["kinetic_energy"][0]  # it ran
     for field in ("position", "velocity", "J"):
