@@ -119,7 +119,9 @@ class Topology:
         bodies = [b for r in due for b in r.bodies if b.moves]
         for b in bodies:  # the penalty restarts at 0
             sim.ledger.totals["hourglass_released"][b.index].add(sim.hg_psi[b.lo:b.hi])
-        moving = np.isin(sim.body, [b.index for b in bodies])  # the rows whose reference moves now
+        # the rows whose reference moves now: those of every moving body (the mask adopt made), or fewer
+        moving = sim.moves if len(bodies) == sum(b.moves for b in sim.bodies) else \
+            np.isin(sim.body, [b.index for b in bodies])
         n = sim.n_owned
         moved = {name: self._moved(sim, name, bodies) for name in sim.sets}  # stress points at the current configuration
         x = sim.X[:n] + sim.u[:n] if moving.all() else \
