@@ -45,10 +45,10 @@ for line in sys.stdin:
             print(json.dumps({"error": f"{type(exc).__name__}: {exc}"}), flush=True)
             continue
         rng = np.random.default_rng(0)
-        sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
+        sim.state.v[: sim.state.n_owned] = 1e-3 * rng.standard_normal(sim.state.v[: sim.state.n_owned].shape)
         for _ in range(5):
             sim.step()
-        print(json.dumps({"particles": int(sim.n_owned)}), flush=True)
+        print(json.dumps({"particles": int(sim.state.n_owned)}), flush=True)
     else:
         start = time.perf_counter()
         for _ in range(cmd["steps"]):

@@ -159,9 +159,9 @@ class Outputs:
 def balance_check(sim, scene: dict, restored: dict | None) -> BalanceCheck:
     """The run's balance check (parsph.balance_check) of `sim`: its total mass, the axes no
     symmetry plane is normal to, and whether its formulations conserve momentum (collective)."""
-    mass = float(allsum(sim.comm, [total(sim.mass[: sim.n_owned])])[0])
+    mass = float(allsum(sim.comm, [total(sim.state.mass[: sim.state.n_owned])])[0])
     planes = {plane["axis"] for plane in scene["symmetry"]}
-    free = [a for a in range(sim.dim) if a not in planes]
-    momentum = all(b.formulation.conserves_momentum for b in sim.bodies)
-    energy = all(b.formulation.conserves_energy for b in sim.bodies)
-    return BalanceCheck(scene["balance"], sim.dim, mass, free, momentum, energy, restored)
+    free = [a for a in range(sim.state.dim) if a not in planes]
+    momentum = all(b.formulation.conserves_momentum for b in sim.state.bodies)
+    energy = all(b.formulation.conserves_energy for b in sim.state.bodies)
+    return BalanceCheck(scene["balance"], sim.state.dim, mass, free, momentum, energy, restored)
