@@ -101,10 +101,13 @@ class Contact:
         pass
 
     def __init__(self, specs: list, bodies: list, body: np.ndarray, measure: np.ndarray, mass: np.ndarray,
-                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm, planes: list = ()):
+                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm, planes: list = (),
+                 kernel=None):
         """specs: the scene's [[contact]] tables; bodies: the simulation's bodies (names,
         constants); body, measure, mass, gid: of the local particles (the owned first);
-        planes: the scene's [[symmetry]] planes."""
+        planes: the scene's [[symmetry]] planes; kernel: the kernel relations
+        (topology.Topology: `kernel_pairs()`, and `builds`, which counts their builds), whose
+        pairs a self-contact leaves out."""
         n = n_owned
         index = {b.name: b.index for b in bodies}
         self.entries = [(index[s["bodies"][0]], index[s["bodies"][1]]) for s in specs]
@@ -150,6 +153,7 @@ class Contact:
         self.rule = Skin(self.skin, comm)  # when the lists are searched again
         self.self_contact = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
         self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
+        self.kernel, self.local_gid, self.seen = kernel, gid, None  # the kernel relations' build last seen
         self.planes = list(planes)
         self.total = comm.allreduce(n)  # the particles of all ranks: an image's id is its source's plus a multiple
         self.points = self.owned  # the contact points: owned, contact ghosts, then mirror images (search)
@@ -164,6 +168,9 @@ class Contact:
         lowered to the step in which a particle in contact moves a quarter of the skin, so
         that the lists see every contact coming (a pair closes in by at most half the skin
         between searches), whatever the speed."""
+        if self.self_contact and self.kernel.builds != self.seen:  # the kernel's pairs changed
+            self.exclude(self.kernel.kernel_pairs(), self.local_gid)
+            self.seen = self.kernel.builds
         if self.rule.due(x, self.mine):
             self.search(x)
         else:

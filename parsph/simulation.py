@@ -124,8 +124,7 @@ class Simulation:
                 b.formulation.build(state, b, b.relation.kernel, self.topology.skin)
         self.conditions.adopt(state, self.t)
         self.walls.select(state.groups)
-        self.interactions = Interactions(scene, state, self.ledger)  # parsph.interactions
-        self.exclude_kernel_pairs()
+        self.interactions = Interactions(scene, state, self.ledger, self.topology)  # parsph.interactions
         self.make_stages()
 
     def make_stages(self) -> None:
@@ -134,11 +133,6 @@ class Simulation:
             b.stages = [] if b.rigid else b.formulation.stages(self, b)
             if b.rigid:
                 self.state.F[b.lo:b.hi] = np.eye(self.state.dim)
-
-    def exclude_kernel_pairs(self) -> None:
-        """Tell a self-contact the kernel's pairs, which it leaves out (parsph.contact)."""
-        if self.interactions.contact:
-            self.interactions.contact.exclude(self.topology.kernel_pairs(), self.state.gid)
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self, move_reference: bool = False) -> None:
@@ -290,16 +284,13 @@ class Simulation:
 
     def _move_reference(self, due: list) -> bool:
         """The reference update of the `due` kernel relations (topology.Topology.move): the
-        particles of a search adopted, or what the kept lists rebuilt (the kernel pairs a
-        self-contact leaves out, the collocation, the stages) taken up. Returns whether it
-        searched (the arrays are new)."""
+        particles of a search adopted, or the collocation and the stages made on what the kept
+        lists rebuilt. Returns whether it searched (the arrays are new)."""
         start = time.perf_counter()
         with self.topology.failing(self.step_count, self.t):
             local = self.topology.move(self.state, self.ledger, due)
             if local is not None:
                 self.adopt(local)
-            else:
-                self.exclude_kernel_pairs()
         if local is None:
             self.conditions.recollocate(self.state)
             self.make_stages()
@@ -314,7 +305,6 @@ class Simulation:
         broken = self.failure.break_pairs(self.state, self.topology, len(self.scene["symmetry"]))
         if broken is None:
             return
-        self.exclude_kernel_pairs()
         self.compute_forces()
         if self.failure.keep_elastic(self.state, broken):
             self.compute_forces()

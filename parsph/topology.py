@@ -34,6 +34,7 @@ class Topology:
         self.relations = [KernelRelation(k, group, bodies, scene, length, comm)
                           for k, group in enumerate(groups(bodies, scene))]
         self.rebalance = scene["parallel"]["rebalance"]  # the work imbalance that repartitions
+        self.builds = 0  # the builds of the relations' reference data so far (a self-contact's cue)
 
     @property
     def count(self) -> int:
@@ -88,6 +89,7 @@ class Topology:
     def build(self, at: Configuration, **how) -> np.ndarray:
         """Every relation's reference data in configuration `at` (KernelRelation.build);
         returns the singular rows (with `tolerant`)."""
+        self.builds += 1
         return np.concatenate([r.build(at, **how).bad for r in self.relations])
 
     def kernel_pairs(self) -> Relation:
@@ -200,6 +202,7 @@ class Topology:
         with collective(state.comm):
             for r in due:
                 r.build(at, search=False)
+            self.builds += 1
             for r in due:
                 for b in r.bodies:
                     b.formulation.build(state, b, r.kernel, self.skin, search=False)
