@@ -123,7 +123,6 @@ class RankState:
         self.gid = local.gid[:keep]
         self.body = body[:keep]
         self.moves = np.array([b.moves for b in self.bodies])[self.body]  # the rows whose reference moves
-        self.all_move = bool(self.moves.all())
         for b in self.bodies:
             b.lo, b.hi = (int(k) for k in np.searchsorted(self.gid[:n], [b.first, b.last]))
         self.X, self.mass, self.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
