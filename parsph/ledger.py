@@ -238,7 +238,7 @@ class Ledger:
             out["strain"].append([self.part(b, b.formulation.integrated(sim.state, b, lambda A: A["psi"]))])
             out["plastic"].append([] if not b.law.plastic else [self.part(b, b.formulation.integrated(
                 sim.state, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work]))])
-            out["damage"].append([] if not b.failure else [self.part(b, sim.state.volume[lo:hi] * _damage_work(sim, b)),
+            out["damage"].append([] if not b.failure else [self.part(b, sim.state.volume[lo:hi] * _damage_work(sim.state, b)),
                                                            acc["damage_released"]])
             out["viscous"].append([acc["viscous_work"]])
             out["hourglass"].append([self.part(b, sim.state.hg_psi[lo:hi]), acc["hourglass_work"], acc["hourglass_released"]])
