@@ -198,6 +198,15 @@ class Stage:
     force_row: bool = False
 
 
+def bound(state, fields: dict) -> dict:
+    """The rank's arrays a stage's kernel parameters are bound to: `fields` maps each
+    parameter to the field it takes, named as Stage.reads names the particles' fields (a
+    carried field or a work array of state.RankState), so that a stage declares as read at
+    neighbours the very arrays its kernel reads there."""
+    arrays = state.particles.arrays
+    return {p: arrays[name] if name in arrays else getattr(state, name) for p, name in fields.items()}
+
+
 def check_shared_keys(path: str, form: dict, kind: str, moves_reference: bool) -> None:
     """The rules every formulation family applies to a formulation table of type `kind`
     (InputError naming the key at `path`), after its own defaults: the update triggers

@@ -29,7 +29,7 @@ from parsph import stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations import tlsph
-from parsph.formulations.base import Formulation, Running, Stage, check_shared_keys
+from parsph.formulations.base import Formulation, Running, Stage, bound, check_shared_keys
 from parsph.formulations.reference import PairOptions
 from parsph.kernels.functions import KERNEL_NAMES
 from parsph.keys import Key, non_negative, one_of
@@ -163,7 +163,7 @@ class NodalFormulation(Formulation):
         scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
         force_scratch = (np.empty(dim), np.empty(6), np.empty((3, 3)))
         out = []
-        fs = state.fs if self.updated else state.F  # the motion from the reference: F itself in the initial one
+        motion = "fs" if self.updated else "F"  # the motion from the reference: F itself in the initial one
         if state.updated:  # d apart from u: the displacement since each body's reference
             def displacement():
                 lo, hi = body.lo, body.hi
@@ -198,18 +198,23 @@ class NodalFormulation(Formulation):
                 self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, state.d, state.f)
             out.append(Stage("kinematics+stress", gradient, reads=("d",), writes=("f",)))
 
+        # the parameters the kernels read at neighbours as their compile-time switches decide,
+        # bound by name to the fields they take: the stages declare those as read
+        fields = dict(d="d", f="f", fs=motion, Fr="Fr" if self.updated else "F")
+        neighbours = ("d", "f") if hessian else ("d",)
+
         def kinematics_stress():
-            ref = body.relation.ref
+            ref, a = body.relation.ref, bound(state, fields)
             bad = self.kinematics_stress(
-                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, state.d, state.volume,
-                state.youngs, body.constants.values, *state.material_state(body), *state.damage_state(body), state.f,
-                fs, state.F, state.Fr if self.updated else state.F, state.VP, state.J, state.psi, state.hg_psi, *scratch, running.dt)
+                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, a["d"], state.volume,
+                state.youngs, body.constants.values, *state.material_state(body), *state.damage_state(body), a["f"],
+                a["fs"], state.F, a["Fr"], state.VP, state.J, state.psi, state.hg_psi, *scratch, running.dt)
             if bad >= 0:
                 raise stability.unstable_particle(running, state, bad)
         states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
                        if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
-        out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
+        out.append(Stage("kinematics+stress", kinematics_stress, reads=tuple(fields[p] for p in neighbours),
                          writes=("fs", "F", "VP", "J", "psi", "hg_psi") + trials))
         if hessian:
             def hessian_transpose():
@@ -222,16 +227,18 @@ class NodalFormulation(Formulation):
                               body.law.plastic.strain if viscous else 0], float)
         kind = KERNEL_NAMES.index(body.relation.kernel)
 
+        force_fields = dict(d="d", fs=motion, VP="VP", B="B", youngs="youngs", v="v",
+                            plastic=body.law.state + "_trial" if viscous else "no_state")
+        force_neighbours = ("VP",) + (("d", "fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \
+            (("v", "plastic") if viscous else ())
+
         def forces():
-            ref = body.relation.ref
+            ref, a = body.relation.ref, bound(state, force_fields)
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
-                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, state.d, fs, state.VP, state.B, state.youngs,
+                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, a["d"], a["fs"], a["VP"], a["B"], a["youngs"],
                         state.volume, state.mass, state.f_int, state.f_hg, running.stable.bound_hourglass, state.omega_hg2,
-                        *force_scratch, state.v, state.material_state(body)[1] if viscous else state.no_state,
-                        state.support, kind, constants)
-        reads = ("VP",) + (("d", "fs" if self.updated else "F", "youngs") if hourglass else ()) + \
-            (("B",) if hessian else ()) + \
-            (("v", body.law.state + "_trial") if viscous else ())
+                        *force_scratch, a["v"], a["plastic"], state.support, kind, constants)
+        reads = tuple(force_fields[p] for p in force_neighbours)
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2"), force_row=True))
         if any(self.viscosity):
