@@ -213,7 +213,7 @@ class GalerkinFormulation(Formulation):
                              "efg with nodal integration, or model the whole body")
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):  # failure: particle methods only
-        self.type = options["type"]
+        super().__init__(options, dim, law, failure)
         self.shape = "kbm" if self.type == "kbm" else "mls"
         self.points = integration_set(options)  # the other set, if any
         # the Eulerian kernel: the updated reference rebuilt at every step (as for sph, rlm)

@@ -109,7 +109,7 @@ class NodalFormulation(Formulation):
         return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
-        self.type = options["type"]
+        super().__init__(options, dim, law, failure)
         self.eulerian = options.get("kernel") == "eulerian"
         self.updated = self.type == "ulsph" or self.eulerian
         self.conserves_momentum = self.type != "rlm"  # RLM's force row [R Table 1] does not
