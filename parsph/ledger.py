@@ -19,7 +19,6 @@ from numba import njit
 
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.fields import MOMENT_COMPONENTS, Field, register
-from parsph.formulations import tlsph
 from parsph.interactions import RUNNING as INTERACTION_RUNNING, TERMS
 from parsph.materials import damage
 
@@ -187,7 +186,7 @@ class Ledger:
         n, start = state.n_owned, self._start
         du = state.u[:n] - start["u"]
         for b in state.bodies:
-            if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER:  # not a potential force
+            if b.formulation.absorbs_hourglass_work:  # not a potential force
                 work = -0.5 * (start["f_hg"][b.lo:b.hi] + state.f_hg[b.lo:b.hi]) * du[b.lo:b.hi]
                 self.totals["hourglass_work"][b.index].add(work)
         if state.viscous:

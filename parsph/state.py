@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parsph import fields, materials
-from parsph.formulations import FORMULATIONS, tlsph
+from parsph.formulations import FORMULATIONS
 from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.points import PointSet
 
@@ -100,9 +100,9 @@ class RankState:
         self.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
         self.eta = max(f.eta for f in forms)
         self.hourglass = any(f.hourglass_form for f in forms)
-        self.viscous = any(any(getattr(f, "viscosity", ())) for f in forms)
+        self.viscous = any(f.viscous for f in forms)
         self.needs = {"hessian": self.eta > 0, "hourglass": self.hourglass, "viscous": self.viscous,
-                      "variational": any(f.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for f in forms),
+                      "variational": any(f.hourglass_penalty for f in forms),
                       "limited": self.viscous or limited}
         # the formulations, laws and their states, the updated reference and damage the bodies use
         self.owners = {f.type for f in forms} | {b.law.name for b in bodies} | {b.law.state for b in bodies}
