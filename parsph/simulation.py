@@ -175,9 +175,12 @@ class Simulation:
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
             k += 1
-        internal = state.f_int + state.f_hg if state.hourglass else state.f_int.copy()
-        if state.viscous:
-            internal += state.f_visc
+        internal = None
+        for force in state.forces():  # state.FORCES
+            if internal is None:
+                internal = getattr(state, force.name).copy()
+            else:
+                internal += getattr(state, force.name)
         for interaction in self.interactions:  # parsph.interactions
             t0 = clock()
             reads = [name for name in interaction.reads if name in stale]

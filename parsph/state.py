@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -80,6 +81,26 @@ WORK = (
     Work("viscous_heating", "owned", need="viscous"),  # the power it turns to heat [W]
     # the step allowed by the particles' motion (closing pairs: viscosity, contact; surfaces)
     Work("step_limit", "owned", need="limited", fill=np.inf),
+)
+
+
+@dataclass(frozen=True)
+class Force:
+    """A force between particles that the bodies' stages write into the work array `name`
+    (owned rows): summed into the internal force in FORCES' order where the bodies need the
+    array; a force without a potential has its work (trapezoidal in the step) booked to the
+    ledger's running total `work` for the bodies whose formulation `absorbs` it
+    (ledger.Ledger.end)."""
+
+    name: str
+    work: str | None = None
+    absorbs: Callable = lambda formulation: True
+
+
+FORCES = (
+    Force("f_int"),  # the stress's: its work is the strain energy
+    Force("f_hg", "hourglass_work", lambda f: f.absorbs_hourglass_work),  # the variational form's is a potential
+    Force("f_visc", "viscous_work"),  # artificial viscosity
 )
 
 
@@ -156,6 +177,11 @@ class RankState:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, decomp, self.carried, arrays)
         self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
+
+    def forces(self) -> list:
+        """The forces of FORCES whose arrays the bodies need (state.Force)."""
+        needs = {w.name: w.need for w in WORK}
+        return [f for f in FORCES if needs[f.name] is None or self.needs[needs[f.name]]]
 
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned
