@@ -327,7 +327,7 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
     contact = contact_parts(sim, reduction)
     others = interactions.columns(sim, reduction)
     rigid = rigid_parts(sim, reduction)
-    probes = probe_parts(sim.scene["probes"], sim, reduction)
+    probes = probe_parts(sim.scene.probes, sim, reduction)
     reduction.reduce()
     out = {"time": sim.t, "step": float(sim.step_count), "dt": sim.stable.dt,
            "reference_updates": float(sim.topology.count)}

@@ -126,7 +126,7 @@ class Failure:
         X, measure, volume = (sim.Xr, sim.measure_r, sim.volume_r) if sim.updated else \
             (sim.X, sim.measure, sim.volume)
         searched = find_pairs(X, sim.support, sim.gid, n)  # in the reference: once for every round
-        planes = len(sim.scene["symmetry"])
+        planes = len(sim.scene.symmetry)
         while True:
             self.refresh(sim, state)
             detached = self.failed(state, sim.body)

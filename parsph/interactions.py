@@ -43,11 +43,11 @@ class Kind:
 
 def _contact(sim):
     """parsph.contact's bodies in contact, or None."""
-    if not sim.scene.get("contact"):
+    if not sim.scene.contact:
         return None
     from parsph import config  # config imports the interactions' keys
-    contact = Contact(sim.scene["contact"], sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, sim.n_owned, sim.dim,
-                      config.thickness(sim.scene), sim.comm, sim.scene["symmetry"])
+    contact = Contact(sim.scene.contact, sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, sim.n_owned, sim.dim,
+                      config.thickness(sim.scene), sim.comm, sim.scene.symmetry)
     return contact
 
 

@@ -75,7 +75,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
     particle set; the blocks are partitioned among the ranks by position."""
     with collective():
         scene = config.load(scene_path, overrides)
-    out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
+    out_dir = out_dir or os.path.join("results", scene.scene.name)
     from parsph.build import build_local
     from parsph.parallel.decomposition import localize
 
@@ -131,7 +131,7 @@ def check_resumable(scene: dict, out_dir: str) -> None:
     if reached is None:
         return
     t_last, step_last = reached
-    end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
+    end, max_steps = scene.time.end, scene.time.max_steps
     if end < t_last * (1 - 1e-12) or (max_steps and max_steps < step_last):
         raise InputError(
             f"{out_dir} already holds the run to step {step_last}, t = {t_last:.6g} s; a restart that "
@@ -159,7 +159,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     scene, out_dir, previous, local, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
     from parsph.simulation import Simulation
 
-    name = scene["scene"]["name"]
+    name = scene.scene.name
     scene_json = config.to_json(scene)
     start = time.perf_counter()
     count = local.total
@@ -167,14 +167,14 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     del local
     setup_seconds = time.perf_counter() - start
     output_dir.claim_output(out_dir, previous)
-    say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
+    say(f"parsph: scene '{name}': {count} particles, {scene.scene.dimension}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 
     outputs = Outputs(sim, scene, scene_json, out_dir, data, debug)
-    end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
-    progress = Progress(end, max_steps, count, scene["output"]["progress_seconds"],
+    end, max_steps = scene.time.end, scene.time.max_steps
+    progress = Progress(end, max_steps, count, scene.output.progress_seconds,
                         enabled=COMM.rank == 0 and not quiet)
-    stop = StopRequest(scene["time"]["wall_limit"])
+    stop = StopRequest(scene.time.wall_limit)
     sim.stage_seconds.clear()  # the set-up's force evaluation (and compilation) is not a step
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count

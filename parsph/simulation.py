@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from parsph import config, interactions, readouts
+from parsph import interactions, readouts
 from parsph.bc import apply_initial_conditions
 from parsph.conditions import (external_force, free_rigid_bodies, prescribe_displacement,
                                prescribe_velocity)
@@ -44,8 +44,8 @@ class Simulation:
         partitioned); `restart` (io.checkpoint.load: clock and totals) continues a run."""
         self.scene = scene
         self.comm = comm
-        self.dim = dim = scene["scene"]["dimension"]
-        specs = config.bodies(scene)
+        self.dim = dim = scene.scene.dimension
+        specs = scene.bodies
         offsets = local.offsets if local.offsets is not None else np.array([0, local.total])
         self.offsets = np.asarray(offsets, np.int64)
         self.bodies = [Body(b, spec, int(self.offsets[b]), int(self.offsets[b + 1]), dim)
@@ -53,26 +53,26 @@ class Simulation:
         self.failure = Failure(self.bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, self.bodies, local, comm)
         settle(self)
-        self.rebalance = scene["parallel"]["rebalance"]
-        self.group_names = sorted(scene["groups"])
+        self.rebalance = scene.parallel.rebalance
+        self.group_names = sorted(scene.groups)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
-        body_acc = scene["loads"]["body_acceleration"]
+        body_acc = scene.loads.body_acceleration
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
-        self.damping = scene["time"]["damping"]
+        self.damping = scene.time.damping
         self.t = restart["clock"]["t"] if restart else 0.0  # the constraints in force depend on it
         self.step_count = 0
         self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
         self.ledger = Ledger(self.bodies)
-        self.stable = StableStep(scene["time"])
-        self.walls = Walls(scene["walls"], scene["tools"], dim, scene["surfaces"], scene["parameters"])
+        self.stable = StableStep(scene.time)
+        self.walls = Walls(scene.walls, scene.tools, dim, scene.surfaces, scene.parameters)
         self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
         adopt(self, local)
         check_hourglass_stiffness(self)
         n = self.n_owned
         if restart is None:
             with collective(comm):
-                apply_initial_conditions(scene["initial"], self.groups, self.X[:n], self.gid[:n], self.u[:n],
-                                         self.v[:n], scene["parameters"])
+                apply_initial_conditions(scene.initial, self.groups, self.X[:n], self.gid[:n], self.u[:n],
+                                         self.v[:n], scene.parameters)
             prescribe_displacement(self, 0.0)
             prescribe_velocity(self, 0.0)
         self.rigid_bodies = free_rigid_bodies(self, restart)

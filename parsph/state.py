@@ -33,17 +33,17 @@ class Body:
     constants, its formulation; lo..hi-1 are its owned rows on this rank."""
 
     def __init__(self, index: int, spec: dict, first: int, last: int, dim: int):
-        self.index, self.name = index, spec["name"]
+        self.index, self.name = index, spec.name
         self.first, self.last = first, last
-        self.law = materials.LAWS[spec["material"]["model"]]
-        self.constants = materials.constants(spec["material"])
-        failure = materials.failure_of(spec["material"])  # materials.FAILURES: damage, johnson_cook_failure
+        self.law = materials.LAWS[spec.material.model]
+        self.constants = materials.constants(spec.material)
+        failure = materials.failure_of(spec.material)  # materials.FAILURES: damage, johnson_cook_failure
         self.failure = failure.failure_id if failure else 0  # 0: none
-        self.failure_strain = spec["material"]["failure_strain"]  # tensile damage's
-        self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
-        self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs
-        self.density = spec["material"]["density"]
-        self.formulation = FORMULATIONS[spec["formulation"]["type"]](spec["formulation"], dim, self.law.law_id,
+        self.failure_strain = spec.material.failure_strain  # tensile damage's
+        self.rigid = spec.rigid  # no stress: moves as one rigid body (parsph.rigid)
+        self.breaks_pairs = spec.material.break_pairs  # a failed particle loses its pairs
+        self.density = spec.material.density
+        self.formulation = FORMULATIONS[spec.formulation.type](spec.formulation, dim, self.law.law_id,
                                                                      failure=self.failure)
         self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0
@@ -84,7 +84,7 @@ def adopt(sim, local: LocalBody) -> None:
     updated = sim.updated and "Xr" in local.fields
     ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
     with collective(sim.comm):
-        local, mirrors = add_images(local, ref[0], sim.scene["symmetry"], sim.comm,
+        local, mirrors = add_images(local, ref[0], sim.scene.symmetry, sim.comm,
                                     skin=sim.topology.skin if sim.updated else 0.0)
         fl, n, dim = local.fields, local.n_owned, sim.dim
         # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
@@ -94,7 +94,7 @@ def adopt(sim, local: LocalBody) -> None:
         body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
         sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
         cut = sim.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, sim.failure.detached,
-                                    len(sim.scene["symmetry"]), local.total)
+                                    len(sim.scene.symmetry), local.total)
         sim.topology.build(Configuration(fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, body, n,
                                          sim.decomp.n_rows), detached=sim.failure.detached, cut=cut)
     if layer2:
@@ -145,7 +145,7 @@ def adopt(sim, local: LocalBody) -> None:
     sim.f_visc = np.zeros((n if sim.viscous else 0, dim))
     sim.viscous_heating = np.zeros(n if sim.viscous else 0)  # the power the viscosity turns to heat [W]
     # the step allowed by the particles' motion (closing pairs: viscosity, contact; surfaces), set at each evaluation
-    limited = sim.viscous or sim.scene.get("contact") or sim.scene.get("surfaces")
+    limited = sim.viscous or sim.scene.contact or sim.scene.surfaces
     sim.step_limit = np.full(n if limited else 0, np.inf)
     sim.youngs = np.array([b.constants.youngs for b in sim.bodies])[sim.body]
     arrays = dict(X=sim.X, measure=sim.measure, volume=sim.volume, mass=sim.mass, support=sim.support,
@@ -160,13 +160,13 @@ def adopt(sim, local: LocalBody) -> None:
         for b in sim.bodies:
             b.formulation.build(sim, b, b.relation.kernel)
     with collective(sim.comm):
-        parameters = sim.scene["parameters"]
-        sim.bcs = BoundaryConditions(sim.scene["bc"], sim.groups, sim.X[:n], sim.gid[:n], parameters,
+        parameters = sim.scene.parameters
+        sim.bcs = BoundaryConditions(sim.scene.bc, sim.groups, sim.X[:n], sim.gid[:n], parameters,
                                       sim.t)
-        sim.tractions = Tractions(sim.scene["tractions"], sim.groups, sim.X[:n], sim.gid[:n],
+        sim.tractions = Tractions(sim.scene.tractions, sim.groups, sim.X[:n], sim.gid[:n],
                                    sim.measure[:n], config.thickness(sim.scene), parameters)
     efg = any(collocated(b.formulation) for b in sim.bodies)
-    sim.collocation = BoundaryCollocation(sim) if efg and sim.scene["bc"] else None
+    sim.collocation = BoundaryCollocation(sim) if efg and sim.scene.bc else None
     sim.walls.select(sim.groups)
     sim.interaction = interactions.build(sim)  # by kind: parsph.interactions
     sim.interactions = [i for i in sim.interaction.values() if i is not None]  # summed in this order

@@ -78,7 +78,7 @@ RUNNING = ("tie_released",  # the tie energy broken ties released
            "tie_work")  # absorbed by the ties' dashpots
 
 
-def check(entries: list, scene: dict, bodies: list, moves) -> list:
+def check(entries: list, symmetry: list, bodies: list, moves) -> list:
     """The validated [[ties]] tables (`entries`, keys filled in, each naming two bodies of the
     scene: config): distinct bodies (`bodies`, resolved), total-Lagrangian (`moves(body)`
     false) and not rigid, every pair once, no symmetry planes."""
@@ -98,7 +98,7 @@ def check(entries: list, scene: dict, bodies: list, moves) -> list:
                 what = "rigid" if body.get("rigid", False) else "of an updated reference"
                 raise InputError(f"{path}.bodies: body '{name}' is {what}; ties join total-Lagrangian bodies "
                                  "(their partners are found once in the reference)")
-    if entries and scene["symmetry"]:
+    if entries and symmetry:
         raise InputError("[[ties]] with [[symmetry]] planes is not supported: the mirror images are not tied; "
                          "model both sides")
     return entries
@@ -248,7 +248,7 @@ def columns(sim, reduction):
 
 def build(sim) -> Ties | None:
     """The ties of the scene's [[ties]], or None."""
-    return Ties(sim.scene["ties"], sim) if sim.scene.get("ties") else None
+    return Ties(sim.scene.ties, sim) if sim.scene.ties else None
 
 
 @njit(cache=True, _nrt=False)

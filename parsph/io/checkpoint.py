@@ -133,7 +133,7 @@ def _estimate_bytes(fields: dict, scene_json: str, comm) -> int:
     return comm.allreduce(local) + len(scene_json) + 64 * 1024 + USERBLOCK
 
 
-def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int) -> str:
+def write_checkpoint(out_dir: str, sim, schedules: dict, scene: config.Scene, keep: int) -> str:
     """Collective: write the run's state; returns the checkpoint's path."""
     comm = sim.comm
     folder = os.path.join(out_dir, "checkpoints")
@@ -331,11 +331,12 @@ def physics_changes(old_scene: dict, scene: dict) -> list:
             if not any(k == free or (free.endswith(".") and k.startswith(free)) for free in RESTART_FREE)]
 
 
-def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
-    """Refuse a restart whose scene changes the physics of the checkpointed run."""
+def check_compatible(old_scene: dict, scene: config.Scene, path: str) -> None:
+    """Refuse a restart whose scene changes the physics of the checkpointed run (`old_scene`
+    as stored)."""
     old_scene = copy.deepcopy(old_scene)
     config.upgrade(old_scene)  # as a scene of today states it
-    changed = physics_changes(old_scene, scene)
+    changed = physics_changes(old_scene, scene.as_dict())
     if changed:
         raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
                          "only time.end, time.max_steps, time.wall_limit, output and balance settings may change "

@@ -48,16 +48,16 @@ class Outputs:
         """`data`: the checkpoint continued (its schedules), or None for a new run; `debug`
         checks at every history row that no particle was lost or duplicated."""
         self.sim, self.scene, self.out_dir, self.debug = sim, scene, out_dir, debug
-        out = self.settings = scene["output"]
+        out = self.settings = scene.output
         resume = None if data is None else sim.step_count
         nexts = {} if data is None else data["schedules"]
-        units = {p["name"]: quantities.units(p["quantity"]) for p in scene["probes"]}
+        units = {p.name: quantities.units(p.quantity) for p in scene.probes}
         self.history = None
         output_dir.ensure_space(out_dir, 3 * len(scene_json), "the run's first output")
         with collective():
             if COMM.rank == 0:
                 with open(os.path.join(out_dir, "scene.json"), "w") as fh:
-                    json.dump(scene, fh, indent=2, sort_keys=True)
+                    json.dump(scene.as_dict(), fh, indent=2, sort_keys=True)
                 self.history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units, resume)
         self.snapshots = SnapshotWriter(out_dir, scene_json, COMM, resume)
         self.history_due = Schedule(out["history_interval"], out["history_every"], nexts.get("history"))
@@ -160,8 +160,8 @@ def balance_check(sim, scene: dict, restored: dict | None) -> BalanceCheck:
     """The run's balance check (parsph.balance_check) of `sim`: its total mass, the axes no
     symmetry plane is normal to, and whether its formulations conserve momentum (collective)."""
     mass = float(allsum(sim.comm, [total(sim.mass[: sim.n_owned])])[0])
-    planes = {plane["axis"] for plane in scene["symmetry"]}
+    planes = {plane.axis for plane in scene.symmetry}
     free = [a for a in range(sim.dim) if a not in planes]
     momentum = all(b.formulation.conserves_momentum for b in sim.bodies)
     energy = all(b.formulation.conserves_energy for b in sim.bodies)
-    return BalanceCheck(scene["balance"], sim.dim, mass, free, momentum, energy, restored)
+    return BalanceCheck(scene.balance, sim.dim, mass, free, momentum, energy, restored)
