@@ -90,7 +90,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
         if COMM.rank == 0:
             previous = other_run(out_dir, data["scene"], data["path"], overwrite)
             if not previous:
-                check_resumable(scene, out_dir)
+                check_resumable(scene.time, out_dir)
     fields = data.pop("fields")
     position = "Xr" if "Xr" in fields else "X"
     local = localize(fields, data.pop("sets"), position, COMM)
@@ -122,16 +122,16 @@ def other_run(out_dir: str, checkpoint_scene: dict, checkpoint_path: str, overwr
     return [p for p in output_dir.run_files(out_dir) if os.path.realpath(p) != keep]
 
 
-def check_resumable(scene: dict, out_dir: str) -> None:
+def check_resumable(settings, out_dir: str) -> None:
     """Refuse, before anything is changed, a restart whose history or snapshots in `out_dir`
-    are damaged, or that would stop before the end of what `out_dir` already holds (it
-    would cut the history and snapshots written after its end)."""
+    are damaged, or that would stop before the end (the scene's [time] `settings`) of what
+    `out_dir` already holds (it would cut the history and snapshots written after its end)."""
     reached = read_reached(os.path.join(out_dir, "history.h5"))
     check_snapshots_readable(os.path.join(out_dir, "snapshots.h5"))
     if reached is None:
         return
     t_last, step_last = reached
-    end, max_steps = scene.time.end, scene.time.max_steps
+    end, max_steps = settings.end, settings.max_steps
     if end < t_last * (1 - 1e-12) or (max_steps and max_steps < step_last):
         raise InputError(
             f"{out_dir} already holds the run to step {step_last}, t = {t_last:.6g} s; a restart that "

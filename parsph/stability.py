@@ -33,13 +33,13 @@ class StableStep:
     def start(self, sim, clock: dict | None) -> None:
         """The first step's size, or the checkpoint's `clock` (collective)."""
         settings = self.settings
-        if settings["dt"] > 0:
-            self.cfl_at = (settings["cfl"] * self.limit(sim)[0], sim.step_count)
+        if settings.dt > 0:
+            self.cfl_at = (settings.cfl * self.limit(sim)[0], sim.step_count)
         self.dt = clock["dt"] if clock else self.next_step(sim)[0]
         self.first = clock.get("first_stable", 0.0) if clock else self.limit(sim)[0]
-        self.floor = settings["step_floor"] * self.first if self.first < math.inf else 0.0
+        self.floor = settings.step_floor * self.first if self.first < math.inf else 0.0
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
-        self.bound_hourglass = settings["dt"] == 0 or (sim.updated and sim.topology.adaptive)
+        self.bound_hourglass = settings.dt == 0 or (sim.updated and sim.topology.adaptive)
 
     def next_step(self, sim) -> tuple:
         """(size of the next step, each kernel relation's largest incremental log strain):
@@ -47,10 +47,10 @@ class StableStep:
         reference update (0 unless it is enabled). Collective."""
         settings = self.settings
         adaptive = sim.updated and sim.topology.adaptive
-        if settings["dt"] > 0:
-            return settings["dt"], self.limit(sim)[1] if adaptive else np.zeros(len(sim.topology.relations))
+        if settings.dt > 0:
+            return settings.dt, self.limit(sim)[1] if adaptive else np.zeros(len(sim.topology.relations))
         step, strains = self.limit(sim)
-        return settings["cfl"] * step, strains
+        return settings.cfl * step, strains
 
     def limit(self, sim) -> tuple:
         """(stable step, each kernel relation's largest incremental log strain) over all
@@ -77,7 +77,7 @@ class StableStep:
         reduced = np.array([-dt, *strains])
         if sim.comm.size > 1:
             sim.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
-        if -reduced[0] == math.inf and self.settings["dt"] > 0:  # nothing bounds a fixed step: it is the user's
+        if -reduced[0] == math.inf and self.settings.dt > 0:  # nothing bounds a fixed step: it is the user's
             return math.inf, reduced[1:]
         if -reduced[0] == math.inf:
             why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in sim.bodies)
@@ -140,7 +140,7 @@ class StableStep:
 
     def advice(self) -> str:
         """What to change when the run has become unstable."""
-        dt = self.settings["dt"]
+        dt = self.settings.dt
         if dt == 0:
             return "reduce time.cfl, raise formulation.hourglass or refine the particles"
         cfl = "" if self.cfl_at is None or self.cfl_at[0] == math.inf else \

@@ -115,11 +115,11 @@ class Ties:
         X, u, v, gid, body, measure, mass, the halo) whose particles are tied (collective)."""
         n, dim, comm = sim.n_owned, sim.dim, sim.comm
         index = {b.name: b.index for b in sim.bodies}
-        self.entries = [(index[s["bodies"][0]], index[s["bodies"][1]]) for s in specs]
+        self.entries = [(index[s.bodies[0]], index[s.bodies[1]]) for s in specs]
         self.labels = [f"{s['bodies'][0]}.{s['bodies'][1]}" for s in specs]
         self.n, self.dim, self.comm, self.ledger = n, dim, comm, sim.ledger
         self.u, self.v = sim.u, sim.v  # the local rows, the ghosts refreshed by the halo
-        self.zeta = np.array([s["damping"] for s in specs])
+        self.zeta = np.array([s.damping for s in specs])
         self.dissipative = bool((self.zeta > 0).any())
         self.reads = ("d", "v") if self.dissipative else ("d",)  # total-Lagrangian: d is u
         rows = len(sim.X)
@@ -130,7 +130,7 @@ class Ties:
         reach = comm.allreduce(float(sim.support[:n].max()) if n else 0.0, op=MPI.MAX)  # add_ghosts'
         self.distance = []
         for k, (s, (a, b)) in enumerate(zip(specs, self.entries)):
-            d = s["distance"] or min(SPACINGS * max(largest[a], largest[b]), reach)
+            d = s.distance or min(SPACINGS * max(largest[a], largest[b]), reach)
             if d > reach:
                 error = InputError(f"ties[{k}].distance = {d:g} m exceeds the halo's reach, the largest kernel "
                                    f"support {reach:g} m: give at most that, or a larger kernel.support")
@@ -181,12 +181,12 @@ class Ties:
         c = [b.constants for b in sim.bodies]
         M = np.array([x.lam + 2.0 * x.mu for x in c])[sim.body]
         G = np.array([x.mu for x in c])[sim.body]
-        factor = np.array([s["stiffness"] for s in specs])[self.entry] if len(specs) else np.zeros(0)
+        factor = np.array([s.stiffness for s in specs])[self.entry] if len(specs) else np.zeros(0)
         self.k_n = factor * 2.0 / (gap * (1.0 / M[p] + 1.0 / M[q]))
         self.k_t = np.where((G[p] > 0) & (G[q] > 0), factor * 2.0 / (gap * (1.0 / np.where(G[p] > 0, G[p], 1.0)
                                                                               + 1.0 / np.where(G[q] > 0, G[q], 1.0))),
                             0.0)
-        strength = np.array([[s["normal_strength"], s["shear_strength"]] for s in specs]).reshape(-1, 2)
+        strength = np.array([[s.normal_strength, s.shear_strength] for s in specs]).reshape(-1, 2)
         self.strength = strength[self.entry]
         self.reduced = sim.mass[p] * sim.mass[q] / (sim.mass[p] + sim.mass[q])
         self.broken = np.zeros(len(j), np.bool_)

@@ -133,8 +133,9 @@ def _estimate_bytes(fields: dict, scene_json: str, comm) -> int:
     return comm.allreduce(local) + len(scene_json) + 64 * 1024 + USERBLOCK
 
 
-def write_checkpoint(out_dir: str, sim, schedules: dict, scene: config.Scene, keep: int) -> str:
-    """Collective: write the run's state; returns the checkpoint's path."""
+def write_checkpoint(out_dir: str, sim, schedules: dict, scene_json: str, keep: int) -> str:
+    """Collective: write the run's state, with the resolved scene `scene_json`
+    (config.to_json); returns the checkpoint's path."""
     comm = sim.comm
     folder = os.path.join(out_dir, "checkpoints")
     name = f"step_{sim.step_count:08d}.h5"
@@ -143,7 +144,6 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: config.Scene, ke
     gid = sim.gid[:sim.n_owned]
     state = state_of(sim)
     fields = state["fields"]
-    scene_json = config.to_json(scene)
     with collective():
         if comm.rank == 0:
             os.makedirs(folder, exist_ok=True)
