@@ -1,9 +1,12 @@
 """Scene files: TOML schema, defaults, validation and `--set` overrides.
 
-A scene is read with the standard library's `tomllib`, checked against SCHEMA below and
-returned as a plain nested dict with every default filled in (the *resolved scene*). The
-resolved scene is what the solver reads and what every output file stores. Any problem is
-an `InputError` whose message names the key (`material.density`, `bc[1].group`, ...).
+A scene is read with the standard library's `tomllib`, checked against the Key tables below
+and resolved: every default filled in. The solver reads the resolved scene typed (`Scene`:
+a frozen section per table, `scene.time.cfl`, and a tuple of typed entries per array of
+tables, `scene.walls[0].normal`, their classes made from the Key tables by
+parsph.sections); every output file stores it as the nested table (`Scene.as_dict`,
+`to_json`). Any problem is an `InputError` whose message names the key
+(`material.density`, `bc[1].group`, ...).
 """
 
 from __future__ import annotations
@@ -872,7 +875,7 @@ def _bodies(scene: dict) -> list:
 
 
 # The typed sections (parsph.sections) of the resolved scene, made from the Key tables:
-# a section per table, an entry class per array of tables.
+# a section per table, an entry class per array of tables (a new array of TOP_LEVEL needs its own).
 SECTION_TYPES = {name: section(name.capitalize(), keys) for name, keys in SECTIONS.items()}
 ENTRY_TYPES = {name: section(cls, keys) for name, cls, keys in (
     ("bc", "Condition", BC_KEYS), ("tractions", "Traction", TRACTION_KEYS), ("walls", "Wall", WALL_KEYS),

@@ -62,6 +62,6 @@ def section(name: str, keys: dict[str, Key]) -> type:
     """A frozen class named `name` with one field per key of `keys`."""
     cls = make_dataclass(name, [attribute(k) for k in keys], bases=(Section,), frozen=True, slots=True)
     cls.KEYS = dict(keys)
-    cls.__module__ = __name__
+    cls.__module__ = __name__  # not 'types', as make_dataclass names it before Python 3.12
     return cls
 
