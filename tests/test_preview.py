@@ -4,6 +4,8 @@ directory as `parsph run` treats them."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import h5py
 import meshio
 import numpy as np
@@ -147,6 +149,6 @@ def test_an_obstacle_with_triangles_gives_its_own(monkeypatch):
             self.names.append("surface0")
 
     monkeypatch.setattr(parsph.walls, "Walls", Obstacles)
-    scene = {"scene": {"dimension": 3}, "walls": [], "tools": [], "surfaces": [], "parameters": {}}
+    scene = SimpleNamespace(scene=SimpleNamespace(dimension=3), walls=(), tools=(), surfaces=(), parameters={})
     (name, triangles), = preview.obstacle_surfaces(scene, np.zeros((1, 3)))
     assert name == "surface0" and np.array_equal(triangles, Surface().triangles(0.0))
