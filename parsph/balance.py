@@ -32,5 +32,5 @@ TERMS = (
     Term("viscous", "viscous_work"),
     Term("hourglass", "hourglass_energy"),
     Term("external", "external_work", -1.0),
-    Term("damping", "damping_work", present=lambda sim: sim.damping > 0),
+    Term("damping", "damping_work", present=lambda sim: sim.conditions.damping > 0),
 )

@@ -112,14 +112,15 @@ class _System:
 
 
 class BoundaryCollocation:
-    """The collocated constraints of a simulation's EFG bodies."""
+    """The collocated constraints `bcs` (bc.BoundaryConditions) of the EFG bodies of a rank's
+    particles (`state`: state.RankState)."""
 
-    def __init__(self, sim):
-        self.sim = sim
-        self.segments = [(b.lo, b.hi, *_phi(b.formulation)) for b in sim.bodies if collocated(b.formulation)]
-        self.efg = np.zeros(sim.n_owned, bool)  # particles of EFG bodies
-        self.lagrangian = np.zeros(sim.n_owned, bool)  # ... whose kernel is Lagrangian
-        for b in sim.bodies:
+    def __init__(self, state, bcs):
+        self.state, self.bcs = state, bcs
+        self.segments = [(b.lo, b.hi, *_phi(b.formulation)) for b in state.bodies if collocated(b.formulation)]
+        self.efg = np.zeros(state.n_owned, bool)  # particles of EFG bodies
+        self.lagrangian = np.zeros(state.n_owned, bool)  # ... whose kernel is Lagrangian
+        for b in state.bodies:
             if collocated(b.formulation):
                 self.efg[b.lo:b.hi] = True
                 self.lagrangian[b.lo:b.hi] = not b.formulation.updated
@@ -128,31 +129,31 @@ class BoundaryCollocation:
     def _for(self, active: tuple, kinds: tuple) -> list:
         key = (active, kinds)
         if key not in self._systems:
-            sim = self.sim
-            mask = np.zeros((sim.n_owned, sim.dim), bool)
+            state = self.state
+            mask = np.zeros((state.n_owned, state.dim), bool)
             for k in active:
-                item = sim.bcs.items[k]
+                item = self.bcs.items[k]
                 if item.kind in kinds:
                     mask[item.rows, item.cols] = True
             mask &= (self.efg if "velocity" in kinds else self.lagrangian)[:, None]
-            with collective(sim.comm):
-                self._systems[key] = [_System(sim.comm, sim.gid, np.flatnonzero(mask[:, c]), self.segments, c)
-                                      for c in range(sim.dim)]
+            with collective(state.comm):
+                self._systems[key] = [_System(state.comm, state.gid, np.flatnonzero(mask[:, c]), self.segments, c)
+                                      for c in range(state.dim)]
         return self._systems[key]
 
     def velocity(self, t: float) -> None:
         """Collocate the velocities of the conditions active at t."""
-        self._apply(self.sim.v, "v", t, ("fixed", "velocity", "displacement"))
+        self._apply(self.state.v, "v", t, ("fixed", "velocity", "displacement"))
 
     def displacement(self, t: float) -> None:
         """Collocate the displacements of the fixed and displacement conditions active at t
         (Lagrangian kernel; with the Eulerian one, Phi is that of the current configuration
         and the displacement follows from the collocated velocities)."""
-        self._apply(self.sim.u, "u", t, ("fixed", "displacement"))
+        self._apply(self.state.u, "u", t, ("fixed", "displacement"))
 
     def _apply(self, y, name, t, kinds):
-        systems = [s for s in self._for(self.sim.bcs.active_items(t), kinds) if s.size]
+        systems = [s for s in self._for(self.bcs.active_items(t), kinds) if s.size]
         if systems:
-            self.sim.particles.refresh(name)
+            self.state.particles.refresh(name)
             for system in systems:
-                system.apply(self.sim.comm, y)
+                system.apply(self.state.comm, y)

@@ -7,80 +7,111 @@ from __future__ import annotations
 
 import numpy as np
 
-from parsph import rigid
+from parsph import config, rigid
+from parsph.bc import BoundaryConditions, Tractions
+from parsph.collocation import BoundaryCollocation, collocated
 from parsph.errors import InputError
 from parsph.parallel.runtime import collective
 from parsph.rigid import RigidBody
 
 
-def prescribe_velocity(sim, t: float) -> None:
-    """The constrained velocities at t (collocated on EFG bodies: parsph.collocation),
-    and the rigid velocities of the free rigid bodies' particles."""
-    sim.bcs.set_velocity(sim.v[: sim.n_owned], t)
-    if sim.collocation:
-        sim.collocation.velocity(t)
-    n = sim.n_owned
-    for body in sim.rigid_bodies:
-        body.project(sim.mass, sim.X[:n] + sim.u[:n], sim.v)
+class Conditions:
+    """The scene's constraints ([[bc]], collocated on EFG bodies), tractions, body force
+    (`loads.body_acceleration`), mass-proportional damping (`time.damping`) and free rigid
+    bodies on a rank's particles."""
+
+    def __init__(self, scene: dict):
+        self.scene = scene
+        body_acc = scene.loads.body_acceleration
+        self.body_acc = None if body_acc is None else np.asarray(body_acc)
+        self.damping = scene.time.damping
+        self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
+        self.bcs = self.tractions = self.collocation = None
+
+    def adopt(self, state, t: float) -> None:
+        """The constraints and tractions on the adopted `state` (state.RankState) at time t
+        (collective)."""
+        scene, n = self.scene, state.n_owned
+        with collective(state.comm):
+            parameters = scene.parameters
+            self.bcs = BoundaryConditions(scene.bc, state.groups, state.X[:n], state.gid[:n], parameters, t)
+            self.tractions = Tractions(scene.tractions, state.groups, state.X[:n], state.gid[:n],
+                                       state.measure[:n], config.thickness(scene), parameters)
+        efg = any(collocated(b.formulation) for b in state.bodies)
+        self.collocation = BoundaryCollocation(state, self.bcs) if efg and scene.bc else None
+
+    def recollocate(self, state) -> None:
+        """The collocation in a new reference of the EFG bodies (on the kept lists)."""
+        if self.collocation:
+            self.collocation = BoundaryCollocation(state, self.bcs)
+
+    def prescribe_velocity(self, state, t: float) -> None:
+        """The constrained velocities at t (collocated on EFG bodies: parsph.collocation),
+        and the rigid velocities of the free rigid bodies' particles."""
+        n = state.n_owned
+        self.bcs.set_velocity(state.v[:n], t)
+        if self.collocation:
+            self.collocation.velocity(t)
+        for body in self.rigid_bodies:
+            body.project(state.mass, state.X[:n] + state.u[:n], state.v)
+
+    def prescribe_displacement(self, state, t: float) -> None:
+        """The constrained displacements at t (collocated on EFG bodies)."""
+        self.bcs.set_displacement(state.u[: state.n_owned], t)
+        if self.collocation:
+            self.collocation.displacement(t)
+
+    def add_loads(self, state, force: np.ndarray, t: float) -> None:
+        """force += the body force and the tractions at t (owned particles)."""
+        if self.body_acc is not None:
+            force += state.mass[: state.n_owned, None] * self.body_acc
+        if self.tractions:
+            self.tractions.add(force, t)
+
+    def external_force(self, state, t: float) -> np.ndarray:
+        """Body force, tractions and constraint reactions on the owned particles."""
+        ext = np.zeros((state.n_owned, state.dim))
+        self.add_loads(state, ext, t)
+        ext[self.bcs.mask] -= state.force[self.bcs.mask]
+        return ext
+
+    def reaction(self, state) -> np.ndarray:
+        """Force the constraints exert on each owned particle (zero where unconstrained)."""
+        r = np.zeros((state.n_owned, state.dim))
+        r[self.bcs.mask] = -state.force[self.bcs.mask]
+        return r
+
+    def free_rigid_bodies(self, state, restart: dict | None) -> None:
+        """The freely moving rigid bodies (parsph.rigid), from the particles' initial
+        velocities or the checkpoint (collective)."""
+        out = []
+        for b in state.bodies:
+            with collective(state.comm):
+                free = b.rigid and not rigid.held(b, self.bcs.items, state.dim, state.comm)
+                if b.rigid and restart is None:
+                    check_rigid_motion(self.bcs, state, b, free)
+            if free:
+                body = RigidBody(b, state.mass, state.X, state.comm)
+                if restart is None:
+                    body.project(state.mass, state.X + state.u, state.v)
+                else:
+                    body.restore(restart["totals"]["rigid"][len(out)])
+                out.append(body)
+        self.rigid_bodies = out
 
 
-def prescribe_displacement(sim, t: float) -> None:
-    """The constrained displacements at t (collocated on EFG bodies)."""
-    sim.bcs.set_displacement(sim.u[: sim.n_owned], t)
-    if sim.collocation:
-        sim.collocation.displacement(t)
-
-
-def external_force(sim) -> np.ndarray:
-    """Body force, tractions and constraint reactions on the owned particles."""
-    n = sim.n_owned
-    ext = np.zeros((n, sim.dim))
-    if sim.body_acc is not None:
-        ext += sim.mass[:n, None] * sim.body_acc
-    if sim.tractions:
-        sim.tractions.add(ext, sim.t)
-    ext[sim.bcs.mask] -= sim.force[sim.bcs.mask]
-    return ext
-
-
-def reaction(sim) -> np.ndarray:
-    """Force the constraints exert on each owned particle (zero where unconstrained)."""
-    r = np.zeros((sim.n_owned, sim.dim))
-    r[sim.bcs.mask] = -sim.force[sim.bcs.mask]
-    return r
-
-
-def free_rigid_bodies(sim, restart: dict | None) -> list:
-    """The freely moving rigid bodies (parsph.rigid), from the particles' initial
-    velocities or the checkpoint (collective)."""
-    out = []
-    for b in sim.bodies:
-        with collective(sim.comm):
-            free = b.rigid and not rigid.held(b, sim.bcs.items, sim.dim, sim.comm)
-            if b.rigid and restart is None:
-                check_rigid_motion(sim, b, free)
-        if free:
-            body = RigidBody(b, sim.mass, sim.X, sim.comm)
-            if restart is None:
-                body.project(sim.mass, sim.X + sim.u, sim.v)
-            else:
-                body.restore(restart["totals"]["rigid"][len(out)])
-            out.append(body)
-    return out
-
-
-def check_rigid_motion(sim, b, free: bool) -> None:
+def check_rigid_motion(bcs, state, b, free: bool) -> None:
     """InputError unless the conditions at t = 0 move the rigid body `b` rigidly
     (collective): each [[bc]] that holds it gives all its particles one value (not an
     expression of position), and no initial displacement moves its particles (a free body
     starts where its parts put it, a held one where its [[bc]] put it: uniformly)."""
-    for i, c in enumerate(sim.bcs.items):
+    for i, c in enumerate(bcs.items):
         mine = (c.index >= b.lo) & (c.index < b.hi)
-        if _spread(sim.comm, c.value.reshape(len(c.index), len(c.components))[mine]) > 0.0:
+        if _spread(state.comm, c.value.reshape(len(c.index), len(c.components))[mine]) > 0.0:
             raise InputError(f"bc[{i}] gives the particles of rigid body '{b.name}' different values (an "
                              "expression of position), which would deform it: hold a rigid body with one value")
-    u = sim.u[b.lo:b.hi]
-    if _spread(sim.comm, np.vstack([u, np.zeros((1, sim.dim))]) if free else u) > 0.0:
+    u = state.u[b.lo:b.hi]
+    if _spread(state.comm, np.vstack([u, np.zeros((1, state.dim))]) if free else u) > 0.0:
         raise InputError(f"an [[initial]] displacement moves the particles of rigid body '{b.name}': a rigid body "
                          "starts where its parts put it (give it an initial velocity, or move it with [[bc]])")
 

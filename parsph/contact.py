@@ -42,27 +42,31 @@ The pairs are found in the current configuration with a skin s of half the large
 distance: candidate lists (the pairs within their contact distance plus 2 s; rows: owned
 particles, columns in global-id order, so that every sum runs in the same order on any
 number of ranks) and contact ghosts (the particles of other ranks within that reach of this
-rank's contact particles, their positions refreshed at every step) are kept until a
+rank's contact particles, their positions refreshed at every step: a plan of the halo of
+parallel.halo, as the kernel's ghosts are) are kept until a
 particle has moved s/2 since they were made: until then they hold every pair within its
 contact distance plus s.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 from mpi4py import MPI
 from numba import njit
 
+from parsph import fields
 from parsph.cells import close_pairs
 from parsph.errors import InputError, ParsphError
 from parsph.exact_sum import allsum, total
 from parsph.neighbors import pair_keys
-from parsph.relations import Skin
+from parsph.parallel.halo import Halo, gather, within_reach
+from parsph.parallel.mirrors import Mirrors, plane_images
+from parsph.relations import Relation, Skin
 
 SKIN = 0.5  # of the largest contact distance
+POINT, VECTOR = fields.get("X"), fields.get("v")  # how the images' positions and velocities reflect
 INSIDE = 0.25  # two particles of two bodies closer than this fraction of their contact distance:
 #                one is inside the other (the contact has failed)
 
@@ -88,7 +92,7 @@ def damping_ratio(restitution: float) -> float:
 class Contact:
     """The scene's contact pairs of bodies, on this rank's particles."""
 
-    name, reads, work = "contact", (), "contact_work"  # parsph.interactions: its own halo
+    name, reads, work = "contact", (), "contact_work"  # parsph.interactions: its own ghosts (a halo plan)
 
     def checkpoint(self) -> dict:  # parsph.interactions: the lists are found again on restart
         return {}
@@ -97,10 +101,13 @@ class Contact:
         pass
 
     def __init__(self, specs: list, bodies: list, body: np.ndarray, measure: np.ndarray, mass: np.ndarray,
-                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm, planes: list = ()):
+                 gid: np.ndarray, n_owned: int, dim: int, thickness: float, comm, planes: list = (),
+                 kernel=None):
         """specs: the scene's [[contact]] tables; bodies: the simulation's bodies (names,
         constants); body, measure, mass, gid: of the local particles (the owned first);
-        planes: the scene's [[symmetry]] planes."""
+        planes: the scene's [[symmetry]] planes; kernel: the kernel relations
+        (topology.Topology: `kernel_pairs()`, and `builds`, which counts their builds), whose
+        pairs a self-contact leaves out."""
         n = n_owned
         index = {b.name: b.index for b in bodies}
         self.entries = [(index[s["bodies"][0]], index[s["bodies"][1]]) for s in specs]
@@ -131,6 +138,8 @@ class Contact:
                 self.inertia[b.lo:b.hi] = float(allsum(comm, [total(mass[b.lo:b.hi])])[0])
         self.radius = 0.5 * radius_factor[body[:n]] * measure[:n] ** (1.0 / dim)
         self.modulus = modulus[body[:n]]
+        self.owned = dict(gid=self.gid, body=self.body, radius=self.radius, modulus=self.modulus, mass=self.mass,
+                          inertia=self.inertia)  # the constants of the contact points, owned
         self.mine = np.flatnonzero(touching[body[:n]])  # owned particles of bodies in contact
         largest = float(self.radius.max()) if n else 0.0
         self.distance = 2.0 * comm.allreduce(largest, op=MPI.MAX)  # the largest contact distance
@@ -144,9 +153,13 @@ class Contact:
         self.rule = Skin(self.skin, comm)  # when the lists are searched again
         self.self_contact = bool((np.diag(self.entry_of) >= 0).any())  # a body in contact with itself
         self.kernel_pairs = np.zeros(0, np.int64)  # pair_keys of the kernel's pairs (self-contact leaves them)
+        self.kernel, self.local_gid, self.seen = kernel, gid, None  # the kernel relations' build last seen
         self.planes = list(planes)
         self.total = comm.allreduce(n)  # the particles of all ranks: an image's id is its source's plus a multiple
-        self.images = None  # the mirror images' rows, sources and reflections (_mirror)
+        self.points = self.owned  # the contact points: owned, contact ghosts, then mirror images (search)
+        self.halo = None  # the contact ghosts' refresh (parallel.halo)
+        self.images = None  # the mirror images' (parallel.mirrors), with planes
+        self.pairs = None  # the candidate lists: a relation of the owned rows to the contact points
 
     def evaluate(self, x: np.ndarray, v: np.ndarray, step_limit: np.ndarray) -> None:
         """The contact forces, energies and spring bounds at the owned particles' current
@@ -155,20 +168,24 @@ class Contact:
         lowered to the step in which a particle in contact moves a quarter of the skin, so
         that the lists see every contact coming (a pair closes in by at most half the skin
         between searches), whatever the speed."""
+        if self.self_contact and self.kernel.builds != self.seen:  # the kernel's pairs changed
+            self.exclude(self.kernel.kernel_pairs(), self.local_gid)
+            self.seen = self.kernel.builds
         if self.rule.due(x, self.mine):
             self.search(x)
         else:
-            self._refresh(x, self.x)
+            self.halo.exchange(x, self.x)
         self.x[: self.n] = x
         if self.dissipative:
-            self._refresh(v, self.v)
+            self.halo.exchange(v, self.v)
             self.v[: self.n] = v
         if self.images is not None:
-            self._reflect(self.x, True)
+            self.images.fill_all(self.x, POINT)
             if self.dissipative:
-                self._reflect(self.v, False)
-        _repulsion(self.n, self.ptr, self.idx, self.x, self.v, self.radius_all, self.modulus_all, self.mass_all,
-                   self.inertia_all, self.body_all, self.entry_of, self.factor, self.zeta, self.friction, self.dt,
+                self.images.fill_all(self.v, VECTOR)
+        c = self.points
+        _repulsion(self.n, self.pairs.ptr, self.pairs.idx, self.x, self.v, c["radius"], c["modulus"], c["mass"],
+                   c["inertia"], c["body"], self.entry_of, self.factor, self.zeta, self.friction, self.dt,
                    self.dim, self.scale, self.skin, self.force, self.dissipation, self.energy, self.omega2,
                    self.entry_force, self.closest)
         mine = self.mine
@@ -199,9 +216,9 @@ class Contact:
         closest pair (collective). The lists it searches are searched again at the first
         evaluation, as without the check."""
         self.search(x)
-        rows = np.repeat(np.arange(self.n), np.diff(self.ptr))
-        sep = self.x[self.idx] - self.x[rows]
-        ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (self.radius_all[rows] + self.radius_all[self.idx])
+        rows, cols, radius = self.pairs.row_of_pair(), self.pairs.idx, self.points["radius"]
+        sep = self.x[cols] - self.x[rows]
+        ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (radius[rows] + radius[cols])
         self.closest[:] = 1.0
         np.minimum.at(self.closest, rows, ratio)
         self.rule.forget()
@@ -240,11 +257,12 @@ class Contact:
         candidate in contact, or None if it touches nothing."""
         if self.closest[i] >= 1.0:
             return None
-        row = self.idx[self.ptr[i]:self.ptr[i + 1]]
+        c = self.points
+        row = self.pairs.idx[self.pairs.ptr[i]:self.pairs.ptr[i + 1]]
         sep = self.x[row] - self.x[i]
-        ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (self.radius_all[row] + self.radius_all[i])
+        ratio = np.sqrt(np.einsum("pa,pa->p", sep, sep)) / (c["radius"][row] + c["radius"][i])
         k = int(np.argmin(ratio))
-        return int(self.gid_all[row[k]] % self.total), int(self.body_all[row[k]]), float(ratio[k])
+        return int(c["gid"][row[k]] % self.total), int(c["body"][row[k]]), float(ratio[k])
 
     def exclude(self, pairs, gid: np.ndarray) -> None:
         """The kernel's pairs (a relation of the owned rows; gid: the local rows' global ids),
@@ -257,111 +275,68 @@ class Contact:
 
     def search(self, x: np.ndarray) -> None:
         """Contact ghosts (the other ranks' contact particles within the largest contact
-        distance plus the skin of this rank's) and candidate lists."""
+        distance plus two skins of this rank's, by parallel.halo), their mirror images and
+        the candidate lists."""
         n, comm, reach = self.n, self.comm, self.distance + 2.0 * self.skin
         self.rule.searched(x, self.mine)
         mine = self.mine
-        own = x[mine]
-        boxes = comm.allgather((own.min(axis=0), own.max(axis=0)) if len(own) else None)
-        self.send, chunks = {}, []
-        for r, box in enumerate(boxes):
-            if r == comm.rank or box is None or not len(own):
-                chunks.append(None)
-                continue
-            gap = np.maximum(0.0, np.maximum(box[0] - own, own - box[1]))
-            sel = mine[np.einsum("na,na->n", gap, gap) <= reach * reach]
-            if len(sel):
-                self.send[r] = sel
-            chunks.append((self.gid[sel], self.body[sel], self.radius[sel], self.modulus[sel], self.mass[sel],
-                           self.inertia[sel]) if len(sel) else None)
-        received = comm.alltoall(chunks) if comm.size > 1 else [None]
-        self.recv = {}
-        start = n
-        for r, chunk in enumerate(received):
-            if chunk is not None:
-                self.recv[r] = slice(start, start + len(chunk[0]))
-                start += len(chunk[0])
-        parts = [c for c in received if c is not None]
-        own = (self.gid, self.body, self.radius, self.modulus, self.mass, self.inertia)
-        self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all, self.inertia_all = (
-            np.concatenate([mine_k] + [c[k] for c in parts]) for k, mine_k in enumerate(own))
+        send = {r: mine[rows] for r, rows in within_reach(x[mine], reach, comm).items()}
+        ghosts = gather(self.owned, send, comm)
+        self.halo = Halo(comm, send, ghosts["owner"], n)
+        self.points = {k: np.concatenate([v, ghosts[k]]) for k, v in self.owned.items()}
+        start = n + len(ghosts["gid"])
         self.x = np.zeros((start, self.dim))
         self.v = np.zeros((start if self.dissipative else 0, self.dim))
         self.x[:n] = x
-        self._refresh(x, self.x)
+        self.halo.exchange(x, self.x)
         points = np.concatenate([mine, np.arange(n, start)])
         if self.planes:
             points = np.concatenate([points, self._mirror(points, reach)])
-        i, j = close_pairs(self.x[points], reach, self.body_all[points], self.entry_of >= 0)
+        self.pairs = self._lists(points, n, reach)
+
+    def _lists(self, points: np.ndarray, n: int, reach: float) -> Relation:
+        """The candidate lists: each owned contact point's pairs with the contact `points`
+        (rows of self.x) of the other body of an entry (or of its own body beyond the
+        kernel's pairs, in a self-contact) within their contact distance plus two skins,
+        the columns in global-id order."""
+        c = self.points
+        i, j = close_pairs(self.x[points], reach, c["body"][points], self.entry_of >= 0)
         i, j = points[i], points[j]
         sep = self.x[j] - self.x[i]
         dist = np.sqrt(np.einsum("pa,pa->p", sep, sep))
-        keep = (dist < self.radius_all[i] + self.radius_all[j] + 2.0 * self.skin) & \
-            (self.entry_of[self.body_all[i], self.body_all[j]] >= 0)
+        keep = (dist < c["radius"][i] + c["radius"][j] + 2.0 * self.skin) & \
+            (self.entry_of[c["body"][i], c["body"][j]] >= 0)
         i, j = i[keep], j[keep]
         if self.self_contact:  # a body touches itself only where the kernel does not join it
-            kernel = np.isin(pair_keys(self.gid_all[i], self.gid_all[j]), self.kernel_pairs)
-            keep = ~(kernel & (self.body_all[i] == self.body_all[j]))
+            kernel = np.isin(pair_keys(c["gid"][i], c["gid"][j]), self.kernel_pairs)
+            keep = ~(kernel & (c["body"][i] == c["body"][j]))
             i, j = i[keep], j[keep]
         i, j = np.concatenate([i, j]), np.concatenate([j, i])
         rows = i < n
         i, j = i[rows], j[rows]
-        order = np.lexsort((self.gid_all[j], i))
-        self.idx = j[order]
-        self.ptr = np.zeros(n + 1, np.int64)
-        np.cumsum(np.bincount(i, minlength=n), out=self.ptr[1:])
+        order = np.lexsort((c["gid"][j], i))
+        ptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(i, minlength=n), out=ptr[1:])
+        return Relation(ptr, j[order], "particles", "contact")
 
     def _mirror(self, points: np.ndarray, reach: float) -> np.ndarray:
-        """Append the mirror images (parallel.mirrors) of the contact points `points` (rows
-        of self.x) within `reach` of the symmetry planes, across each plane and each
-        combination of planes near their corner, with their sources' constants, global ids
-        as parallel.mirrors numbers them (the kernel's pairs of a self-contact are known by
-        them) and reflected positions; return their rows. An image's force is not applied:
-        its source feels the mirrored force from the mirrored pair."""
-        x, dim, tol = self.x, self.dim, 1e-9 * self.distance
-        plane_at = np.zeros(dim)  # a point on every plane
-        for p in self.planes:
-            plane_at[p["axis"]] = p["position"]
-        source, sign, gid = [], [], []
-        for k, subset in enumerate((s for m in range(1, len(self.planes) + 1)
-                                    for s in itertools.combinations(range(len(self.planes)), m)), start=1):
-            near = np.ones(len(points), bool)
-            flip = np.ones(dim)
-            for p in subset:
-                gap = np.abs(x[points, self.planes[p]["axis"]] - self.planes[p]["position"])
-                near &= (gap > tol) & (gap < reach)
-                flip[self.planes[p]["axis"]] = -1.0
-            rows = points[near]
-            source.append(rows)
-            sign.append(np.broadcast_to(flip, (len(rows), dim)))
-            gid.append(self.gid_all[rows] + k * self.total)
-        source, sign = np.concatenate(source), np.concatenate(sign)
-        start = len(x)
-        self.images = (start, source, sign, (1.0 - sign) * plane_at)  # p reflects to sign * p + offset
-        self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all, self.inertia_all = (
-            np.concatenate([a, a[source] if k else np.concatenate(gid)]) for k, a in
-            enumerate((self.gid_all, self.body_all, self.radius_all, self.modulus_all, self.mass_all,
-                       self.inertia_all)))
-        self.x = np.concatenate([x, np.zeros((len(source), dim))])
-        self.v = np.zeros((len(self.x) if self.dissipative else 0, dim))
-        self._reflect(self.x, True)
+        """Append the mirror images (parallel.mirrors.plane_images) of the contact points
+        `points` (rows of self.x) within `reach` of the symmetry planes (on either side: in
+        the current configuration), across each plane and each combination of planes near
+        their corner, with their sources' constants, global ids as parallel.mirrors numbers
+        them (the kernel's pairs of a self-contact are known by them) and reflected
+        positions; return their rows. An image's force is not applied: its source feels the
+        mirrored force from the mirrored pair."""
+        source, sign, offset, gid = plane_images(self.x[points], self.points["gid"][points], self.planes, self.total,
+                                                 reach, 1e-9 * self.distance)
+        source = points[source]
+        start = len(self.x)
+        self.images = Mirrors.one_layer(start, source, sign, offset)
+        self.points = {k: np.concatenate([a, gid if k == "gid" else a[source]]) for k, a in self.points.items()}
+        self.x = np.concatenate([self.x, np.zeros((len(source), self.dim))])
+        self.v = np.zeros((len(self.x) if self.dissipative else 0, self.dim))
+        self.images.fill_all(self.x, POINT)
         return np.arange(start, len(self.x))
-
-    def _reflect(self, into: np.ndarray, position: bool) -> None:
-        """The mirror images' rows of `into` (positions, or velocities if not `position`)
-        from their sources' rows."""
-        start, source, sign, offset = self.images
-        into[start:] = sign * into[source] + offset if position else sign * into[source]
-
-    def _refresh(self, values: np.ndarray, into: np.ndarray) -> None:
-        """The contact ghosts' rows of `into` (positions, velocities) from their owners'
-        `values`."""
-        if not self.recv and not self.send:
-            return
-        requests = [self.comm.Irecv(into[rows], source=r, tag=11) for r, rows in self.recv.items()]
-        data = [np.ascontiguousarray(values[sel]) for sel in self.send.values()]
-        requests += [self.comm.Isend(d, dest=r, tag=11) for r, d in zip(self.send, data)]
-        MPI.Request.Waitall(requests)
 
 
 @njit(cache=True, inline="always")

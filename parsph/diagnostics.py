@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit
 
-from parsph import interactions, readouts
+from parsph import readouts
 from parsph.exact_sum import SCALE, Exact, totals
 from parsph.fields import MOMENT_COMPONENTS
 from parsph.interactions import TERMS
@@ -94,13 +94,13 @@ class RowReduction:
         self.maxima = [math.nan if any(math.isnan(v) for v in m) else max(m) for m in zip(*maxima)]
 
 
-def probe_parts(probes: list, state, reduction: RowReduction):
+def probe_parts(probes: list, sim, reduction: RowReduction):
     """Each probe's part of the row: the reduction of a particle quantity over its group.
     Returns the function that gives the probes' values once `reduction` is reduced."""
     where = []
     for probe in probes:
-        sel = state.group_index(probe.group)
-        q = state.quantity(probe.quantity, sel)
+        sel = sim.group_index(probe.group)
+        q = sim.quantity(probe.quantity, sel)
         if q.ndim == 2:
             q = np.linalg.norm(q, axis=1) if probe.component < 0 else q[:, probe.component]
         how = probe.reduce
@@ -125,27 +125,27 @@ def probe_parts(probes: list, state, reduction: RowReduction):
     return values
 
 
-def global_parts(state, reduction: RowReduction):
+def global_parts(sim, reduction: RowReduction):
     """This rank's parts of the energies (the ledger's terms: parsph.ledger), momenta and
     disorder of all bodies together, and with more than one body of each body's energies.
     Returns the function that gives them as "NAME" and "NAME.BODY" once `reduction` is
     reduced."""
-    dim = state.dim
-    eta = readouts.disorder(state)
-    columns = particle_columns(state.ledger.masses(state), state.v, state.X, state.u, eta)
-    energies = state.ledger.items(state)
-    bodies = state.bodies
+    dim = sim.state.dim
+    eta = readouts.disorder(sim)
+    columns = particle_columns(sim.ledger.masses(sim.state), sim.state.v, sim.state.X, sim.state.u, eta)
+    energies = sim.ledger.items(sim)
+    bodies = sim.state.bodies
     start = reduction.add_sums([columns])
-    n, A = state.n_owned, state.particles.arrays
-    x = state.X[:n] + state.u[:n]
+    n, A = sim.state.n_owned, sim.state.particles.arrays
+    x = sim.state.X[:n] + sim.state.u[:n]
     turns = MOMENT_COMPONENTS[dim]  # the angular momentum's components
     angular = A["internal_angular_impulse"][:n].reshape(n, turns)
-    defects_at = reduction.add_sums([A["internal_impulse"][:n], angular, state.mass[:n, None] * x,
-                                  state.mass[:n] * np.einsum("na,na->n", x, x)])
+    defects_at = reduction.add_sums([A["internal_impulse"][:n], angular, sim.state.mass[:n, None] * x,
+                                  sim.state.mass[:n] * np.einsum("na,na->n", x, x)])
     terms = {t.key: [(reduction.add_sums(body), len(body)) for body in energies[t.key]] for t in TERMS}
     kinetic_at = reduction.add_sums([columns[b.lo:b.hi, 2:2 + dim] for b in bodies]) if len(bodies) > 1 else 0
     top = reduction.add_max([eta.max() if len(eta) else 0.0])
-    shown = [t for t in TERMS if t.shown(state)]
+    shown = [t for t in TERMS if t.shown(sim)]
 
     def balance(kinetic: Exact, parts: dict) -> Exact:
         out = kinetic
@@ -196,16 +196,16 @@ def global_parts(state, reduction: RowReduction):
     return values
 
 
-def contact_parts(state, reduction: RowReduction):
+def contact_parts(sim, reduction: RowReduction):
     """The contact's part of the row (parsph.contact): each entry's force on its first body
     from its second, "contact_force_X.FIRST.SECOND", and the closest approach of two
     particles of bodies in contact over the sum of their contact radii,
     "contact_closest" (below 1: they overlap)."""
-    contact = state.contact
+    contact = sim.interactions.contact
     if contact is None:
         return dict
-    dim = state.dim
-    forces = [contact.entry_force[k, state.bodies[first].lo:state.bodies[first].hi]
+    dim = sim.state.dim
+    forces = [contact.entry_force[k, sim.state.bodies[first].lo:sim.state.bodies[first].hi]
               for k, (first, _) in enumerate(contact.entries)]
     at = reduction.add_sums(forces)
     closest = reduction.add_max([-contact.closest.min() if len(contact.closest) else -1.0])
@@ -221,22 +221,22 @@ def contact_parts(state, reduction: RowReduction):
     return values
 
 
-def rigid_parts(state, reduction: RowReduction):
+def rigid_parts(sim, reduction: RowReduction):
     """Each rigid body's part of the row (parsph.rigid): the contact force on it from the
     other bodies, "rigid_force_X.NAME", and for a freely moving one the torque of those
     forces about its centre of mass, "rigid_torque.NAME" (2D) or "rigid_torque_X.NAME" (3D)."""
-    contact = state.contact
-    rigid = [b for b in state.bodies if b.rigid]
+    contact = sim.interactions.contact
+    rigid = [b for b in sim.state.bodies if b.rigid]
     if contact is None or not rigid:
         return dict
-    dim = state.dim
-    free = {body.body.index: body for body in state.rigid_bodies}
+    dim = sim.state.dim
+    free = {body.body.index: body for body in sim.conditions.rigid_bodies}
     where = []
     for b in rigid:
         f = contact.force[b.lo:b.hi]
         items = [f]
         if b.index in free and dim > 1:
-            r = state.X[b.lo:b.hi] + state.u[b.lo:b.hi] - free[b.index].centre
+            r = sim.state.X[b.lo:b.hi] + sim.state.u[b.lo:b.hi] - free[b.index].centre
             items.append(moments(r, f))
         where.append(reduction.add_sums(items))
 
@@ -255,32 +255,32 @@ def rigid_parts(state, reduction: RowReduction):
     return values
 
 
-def global_diagnostics(state) -> dict:
+def global_diagnostics(sim) -> dict:
     """Energies, momenta and disorder of all bodies together, and with more than one body
     each body's energies as "NAME.BODY" (collective)."""
-    reduction = RowReduction(state.comm)
-    values = global_parts(state, reduction)
+    reduction = RowReduction(sim.comm)
+    values = global_parts(sim, reduction)
     reduction.reduce()
     return values()
 
 
-def check_particle_ids(state) -> None:
+def check_particle_ids(sim) -> None:
     """Debug check (collective): the owned particles of all ranks are exactly the ids
     0..N-1, each once. Compares the count, the sum and the sum of squares of the ids
     (exact integer arithmetic) with those of 0..N-1."""
     from parsph.errors import ParsphError
 
-    gid = state.gid[: state.n_owned].astype(object)
-    count, total, squares = (sum(x) for x in zip(*state.comm.allgather(
+    gid = sim.state.gid[: sim.state.n_owned].astype(object)
+    count, total, squares = (sum(x) for x in zip(*sim.comm.allgather(
         (len(gid), int(gid.sum()), int((gid * gid).sum())))))
-    n = state.decomp.total
+    n = sim.state.decomp.total
     expected = (n, n * (n - 1) // 2, (n - 1) * n * (2 * n - 1) // 6)
     if (count, total, squares) != expected:
-        raise ParsphError(f"particles lost or duplicated at step {state.step_count}: ranks own {count} "
+        raise ParsphError(f"particles lost or duplicated at step {sim.step_count}: ranks own {count} "
                           f"particles, expected {n} (id sums {total}, {squares} vs {expected[1:]})")
 
 
-def check_finite(values: dict, state) -> None:
+def check_finite(values: dict, sim) -> None:
     """Stop the run (collective: `values` are the same global row on every rank) if a
     history value about to be written is not finite, naming the series, the step and the
     particle where the state first leaves the range of double precision: the lowest global
@@ -290,25 +290,25 @@ def check_finite(values: dict, state) -> None:
     bad = [f"{name} = {value}" for name, value in values.items() if not math.isfinite(value)]
     if not bad:
         return
-    n = state.n_owned
-    v = state.v[:n]
+    n = sim.state.n_owned
+    v = sim.state.v[:n]
     with np.errstate(over="ignore", invalid="ignore"):
-        kinetic = 0.5 * state.mass[:n] * np.einsum("na,na->n", v, v)
-        columns = {"position": state.X[:n] + state.u[:n], "velocity": v, "force": state.force[:n],
+        kinetic = 0.5 * sim.state.mass[:n] * np.einsum("na,na->n", v, v)
+        columns = {"position": sim.state.X[:n] + sim.state.u[:n], "velocity": v, "force": sim.state.force[:n],
                    "kinetic energy": kinetic[:, None]}
     mine = []
     for what, column in columns.items():
         rows = np.flatnonzero(~np.isfinite(column).all(axis=1))
         if len(rows):
-            k = rows[np.argmin(state.gid[rows])]
-            mine.append((int(state.gid[k]), what, tuple(column[k].tolist())))
-    found = [c for part in state.comm.allgather(mine) for c in part]
+            k = rows[np.argmin(sim.state.gid[rows])]
+            mine.append((int(sim.state.gid[k]), what, tuple(column[k].tolist())))
+    found = [c for part in sim.comm.allgather(mine) for c in part]
     where = ""
     if found:
         gid, what, value = min(found)
         where = f"; particle {gid} is the first whose {what} is not finite ({', '.join(f'{c:.3g}' for c in value)})"
     error = ParsphError(
-        f"the history row at step {state.step_count}, t = {state.t:.6g} s is not finite: "
+        f"the history row at step {sim.step_count}, t = {sim.t:.6g} s is not finite: "
         f"{', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}{where}; the run is stopped (the output written "
         "so far is intact): check the initial conditions, loads and material constants for values beyond the "
         "range of double precision (1.8e308)")
@@ -325,7 +325,7 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
     walls = reduction.add_sums(sim.walls.contacts)  # obstacle-major, then component
     torques = reduction.add_sums(sim.walls.torques)  # surface-major, then component
     contact = contact_parts(sim, reduction)
-    others = interactions.columns(sim, reduction)
+    others = sim.interactions.columns(sim.state, reduction)
     rigid = rigid_parts(sim, reduction)
     probes = probe_parts(sim.scene.probes, sim, reduction)
     reduction.reduce()
@@ -333,9 +333,9 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
            "reference_updates": float(sim.topology.count)}
     out.update(energies())
     for k, label in enumerate(sim.walls.names):
-        for a, name in enumerate("xyz"[: sim.dim]):
-            out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * sim.dim + a])
-    axes = "z" if sim.dim == 2 else "xyz"
+        for a, name in enumerate("xyz"[: sim.state.dim]):
+            out[f"{label}_force_{name}"] = float(reduction.sums[walls + k * sim.state.dim + a])
+    axes = "z" if sim.state.dim == 2 else "xyz"
     for j, k in enumerate(sim.walls.turning):
         for a, name in enumerate(axes):
             out[f"{sim.walls.names[k]}_torque_{name}"] = float(reduction.sums[torques + j * len(axes) + a])

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from parsph import conditions
 from parsph.kernel_relation import Configuration
 from parsph import materials
 from parsph.ledger import intact_law_work, start_damage_work
@@ -42,22 +41,22 @@ class Failure:
         self.detached = None  # per local row: failed and without pairs (None if no body breaks pairs)
         self.cut = cut  # the pair_keys of the pairs cracks have cut (crack), on every rank; None: not known
 
-    def advance(self, sim, dt: float) -> None:
+    def advance(self, state, dt: float) -> None:
         """Each body's failure model advances from the committed state over the coming step dt
         (materials.FAILURES: tensile damage grows, a Johnson-Cook index of 1 fails its point)."""
         for b in self.bodies:
             if b.failure:
-                state = sim.damage_state(b)[0][b.lo:b.hi]
-                intact = state[:, damage.DAMAGE] == 0.0
-                materials.FAILURES[b.failure].advance(state, b, sim.support[b.lo:b.hi], dt)
-                start_damage_work(sim, b, b.lo + np.flatnonzero(intact & (state[:, damage.DAMAGE] > 0.0)))
-        self.find_broken(sim)
+                held = state.damage_state(b)[0][b.lo:b.hi]
+                intact = held[:, damage.DAMAGE] == 0.0
+                materials.FAILURES[b.failure].advance(held, b, state.support[b.lo:b.hi], dt)
+                start_damage_work(state, b, b.lo + np.flatnonzero(intact & (held[:, damage.DAMAGE] > 0.0)))
+        self.find_broken(state)
 
-    def find_broken(self, sim) -> None:
+    def find_broken(self, state) -> None:
         """Mark the owned particles that have failed (committed damage 1)."""
-        for b in sim.bodies:
+        for b in state.bodies:
             if b.failure:
-                sim.broken[b.lo:b.hi] = sim.damage_state(b)[0][b.lo:b.hi, damage.DAMAGE] >= 1.0
+                state.broken[b.lo:b.hi] = state.damage_state(b)[0][b.lo:b.hi, damage.DAMAGE] >= 1.0
 
     def failed(self, state: np.ndarray | None, body: np.ndarray) -> np.ndarray | None:
         """Which local particles of bodies whose failed particles lose their pairs have
@@ -103,70 +102,69 @@ class Failure:
         searched = find_pairs(X, support, gid, n) if detached[:n].any() else None
         return self.crack(searched, X, measure, gid, n, detached, planes, total)
 
-    def refresh(self, sim, state: np.ndarray) -> None:
-        """The damage `state` of the ghosts of both layers and of the mirror images (collective)."""
-        sim.decomp.refresh_all(state)
-        if sim.decomp.mirrors is not None:
-            sim.decomp.mirrors.copy_all(state)
+    @staticmethod
+    def refresh(decomp, held: np.ndarray) -> None:
+        """The damage state `held` of the ghosts of both layers and of the mirror images
+        (decomp: the halo plan) (collective)."""
+        decomp.refresh_all(held)
+        if decomp.mirrors is not None:
+            decomp.mirrors.copy_all(held)
 
-    def break_pairs(self, sim) -> Broken | None:
+    def break_pairs(self, state, topology, planes: int) -> Broken | None:
         """Particles that have failed since the last call lose their pairs (collective): the
         reference data is built again without them (materials.damage: cracks open), in the
         reference it is built in (X, or X^r when updated; on the kept lists if any), and
         again while it leaves a particle with a singular correction matrix (a particle cut
         off from its body: it fails too). Returns what the state held before (None: no pair
         broke), for keep_elastic and settle once the loop has evaluated the forces on the
-        new pairs."""
-        n = sim.n_owned
-        state, trial = sim.particles.arrays["damage"], sim.particles.arrays["damage_trial"]
-        new = self.failed(state[:n], sim.body) & ~self.detached[:n]
-        if not sim.comm.allreduce(bool(new.any()), op=MPI.LOR):
+        new pairs (`topology`: the kernel relations; `planes`: the symmetry planes)."""
+        n = state.n_owned
+        held, trial = state.particles.arrays["damage"], state.particles.arrays["damage_trial"]
+        new = self.failed(held[:n], state.body) & ~self.detached[:n]
+        if not state.comm.allreduce(bool(new.any()), op=MPI.LOR):
             return
         # the configuration the reference data is built in (X, or X^r when updated)
-        X, measure, volume = (sim.Xr, sim.measure_r, sim.volume_r) if sim.updated else \
-            (sim.X, sim.measure, sim.volume)
-        searched = find_pairs(X, sim.support, sim.gid, n)  # in the reference: once for every round
-        planes = len(sim.scene.symmetry)
+        X, measure, volume = (state.Xr, state.measure_r, state.volume_r) if state.updated else \
+            (state.X, state.measure, state.volume)
+        searched = find_pairs(X, state.support, state.gid, n)  # in the reference: once for every round
         while True:
-            self.refresh(sim, state)
-            detached = self.failed(state, sim.body)
-            with collective(sim.comm):
-                cut = self.crack(searched, X, measure, sim.gid, n, detached[:n] & ~self.detached[:n], planes,
-                                 sim.decomp.total)
-                bad = sim.topology.build(Configuration(X, measure, volume, sim.support, sim.gid, sim.body, n,
-                                                       sim.decomp.n_rows),
-                                         search=False, detached=detached, cut=cut, tolerant=True)
-            if not sim.comm.allreduce(len(bad)):
+            self.refresh(state.decomp, held)
+            detached = self.failed(held, state.body)
+            with collective(state.comm):
+                cut = self.crack(searched, X, measure, state.gid, n, detached[:n] & ~self.detached[:n], planes,
+                                 state.decomp.total)
+                bad = topology.build(Configuration(X, measure, volume, state.support, state.gid, state.body, n,
+                                                   state.decomp.n_rows),
+                                     search=False, detached=detached, cut=cut, tolerant=True)
+            if not state.comm.allreduce(len(bad)):
                 break
             for b in (b for b in self.bodies if b.failure):  # cut off from their bodies: they fail too
                 cut_off = bad[(bad >= b.lo) & (bad < b.hi)]
-                start_damage_work(sim, b, cut_off[state[cut_off, damage.DAMAGE] == 0.0])
-            state[bad, damage.DAMAGE] = trial[bad, damage.DAMAGE] = 1.0
+                start_damage_work(state, b, cut_off[held[cut_off, damage.DAMAGE] == 0.0])
+            held[bad, damage.DAMAGE] = trial[bad, damage.DAMAGE] = 1.0
         self.detached = detached  # the stages read their relation's reference data when they run
-        sim.exclude_kernel_pairs()
-        return Broken(sim.hg_psi.copy(), intact_law_work(sim), state[:, damage.WORK].copy(), sim.F[:n].copy())
+        return Broken(state.hg_psi.copy(), intact_law_work(state), held[:, damage.WORK].copy(), state.F[:n].copy())
 
     @staticmethod
-    def keep_elastic(sim, broken: Broken) -> bool:
+    def keep_elastic(state, broken: Broken) -> bool:
         """After the forces on the new pairs: an elasto-plastic particle keeps its elastic
         state (stress), its plastic metric taking the change of F; returns whether a body
         did (the forces are then evaluated again)."""
-        plastic = [b for b in sim.bodies if b.law.plastic and not b.rigid]
+        plastic = [b for b in state.bodies if b.law.plastic and not b.rigid]
         for b in plastic:
-            b.law.plastic.keep_elastic(sim.material_state(b)[0][b.lo:b.hi], broken.F[b.lo:b.hi], sim.F[b.lo:b.hi])
+            b.law.plastic.keep_elastic(state.material_state(b)[0][b.lo:b.hi], broken.F[b.lo:b.hi], state.F[b.lo:b.hi])
         return bool(plastic)
 
-    def settle(self, sim, broken: Broken) -> None:
+    def settle(self, state, ledger, broken: Broken) -> None:
         """The change of F the broken pairs made does no work (the particles do not move): an
         elastic particle's released strain energy counts as damage work (a damaged particle's
         work W is kept; an intact one's release is added to the ledger's damage_released),
-        the hourglass penalty it drops as released (the balance stays closed); the state is
-        committed."""
-        n = sim.n_owned
-        sim.ledger.add("hourglass_released", broken.penalty[:n] - sim.hg_psi[:n])
-        sim.ledger.add("damage_released", broken.held - intact_law_work(sim))
-        sim.particles.arrays["damage_trial"][:, damage.WORK] = broken.work
-        for points in sim.point_sets():
+        the hourglass penalty it drops as released (the balance stays closed) in the
+        `ledger`; the state is committed."""
+        n = state.n_owned
+        ledger.add("hourglass_released", broken.penalty[:n] - state.hg_psi[:n])
+        ledger.add("damage_released", broken.held - intact_law_work(state))
+        state.particles.arrays["damage_trial"][:, damage.WORK] = broken.work
+        for points in state.point_sets():
             points.commit()
-        self.find_broken(sim)
-        sim.ledger.external = conditions.external_force(sim)
+        self.find_broken(state)

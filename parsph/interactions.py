@@ -35,27 +35,26 @@ class Kind:
     diagnostics.contact_parts)."""
 
     key: str
-    build: Callable
+    build: Callable  # (scene, state.RankState, ledger.Ledger, topology.Topology) -> the interaction or None
     terms: tuple = ()
     running: tuple = ()
-    columns: Callable | None = None  # (sim, diagnostics.RowReduction) -> () -> its history series
+    columns: Callable | None = None  # (it, state, diagnostics.RowReduction) -> () -> its history series
 
 
-def _contact(sim):
+def _contact(scene: dict, state, ledger, topology):
     """parsph.contact's bodies in contact, or None."""
-    if not sim.scene.contact:
+    if not scene.contact:
         return None
     from parsph import config  # config imports the interactions' keys
-    contact = Contact(sim.scene.contact, sim.bodies, sim.body, sim.measure, sim.mass, sim.gid, sim.n_owned, sim.dim,
-                      config.thickness(sim.scene), sim.comm, sim.scene.symmetry)
-    return contact
+    return Contact(scene.contact, state.bodies, state.body, state.measure, state.mass, state.gid, state.n_owned,
+                   state.dim, config.thickness(scene), state.comm, scene.symmetry, topology)
 
 
 KINDS = (
     Kind("contact", _contact,
-         (Term("contact", "contact_energy", present=lambda sim: sim.contact is not None),
+         (Term("contact", "contact_energy", present=lambda sim: sim.interactions.contact is not None),
           Term("contact_work", "contact_work",
-               present=lambda sim: sim.contact is not None and sim.contact.dissipative)),
+               present=lambda sim: sim.interactions.contact is not None and sim.interactions.contact.dissipative)),
          ("contact_work",)),
     Kind("ties", ties.build, ties.TERMS, ties.RUNNING, ties.columns),
 )
@@ -64,53 +63,52 @@ TERMS = balance.TERMS + tuple(term for kind in KINDS for term in kind.terms)  # 
 RUNNING = tuple(name for kind in KINDS for name in kind.running)
 
 
-def build(sim) -> dict:
-    """The scene's interactions on the adopted state `sim`, by kind (None where the scene has
-    none)."""
-    return {kind.key: kind.build(sim) for kind in KINDS}
+class Interactions:
+    """The scene's interactions on a rank's particles: by kind (`contact`, `ties`: None where
+    the scene has none); iterating gives the present ones in KINDS' order, in which their
+    forces are summed. `omega2` is their springs' bound on the squared frequency of the owned
+    particles (the stable step)."""
 
+    def __init__(self, scene: dict, state, ledger, topology):
+        self.by_kind = {kind.key: kind.build(scene, state, ledger, topology) for kind in KINDS}
+        self.contact, self.ties = self.by_kind["contact"], self.by_kind["ties"]
+        self.present = [i for i in self.by_kind.values() if i is not None]
+        self.omega2 = self.present[0].omega2 if len(self.present) == 1 else \
+            np.zeros(state.n_owned if self.present else 0)
 
-def energies(sim, b) -> dict:
-    """Each interaction term's parts on body `b`'s owned particles (parsph.ledger.items): the
-    interaction's energy (half of each pair's) for its first term, its running totals for
-    the others; [] where the scene does not have it."""
-    out = {}
-    for kind in KINDS:
-        interaction = sim.interaction[kind.key]
-        for k, term in enumerate(kind.terms):
-            if interaction is None or not term.shown(sim):
-                out[term.key] = []
-            elif k == 0:
-                out[term.key] = [sim.ledger.part(b, interaction.energy[b.lo:b.hi])]
-            else:
-                out[term.key] = [sim.ledger.totals[term.key][b.index].sums()[0]]
-    return out
+    def __iter__(self):
+        return iter(self.present)
 
+    def add_frequencies(self) -> None:
+        """omega2 = the sum of the present interactions' bounds (after their evaluation), for
+        more than one."""
+        if len(self.present) > 1:
+            self.omega2[:] = self.present[0].omega2
+            for interaction in self.present[1:]:
+                self.omega2 += interaction.omega2
 
-def frequency_bound(present: list, n: int) -> np.ndarray:
-    """The array of the owned particles' bound on the squared frequency from the present
-    interactions (`present`, in order): the one interaction's own, a sum that
-    add_frequencies keeps for several, empty for none."""
-    if len(present) == 1:
-        return present[0].omega2
-    return np.zeros(n if present else 0)
+    def energies(self, sim, b) -> dict:
+        """Each interaction term's parts on body `b`'s owned particles (parsph.ledger.items):
+        the interaction's energy (half of each pair's) for its first term, its running totals
+        for the others; [] where the scene does not have it."""
+        out = {}
+        for kind in KINDS:
+            interaction = self.by_kind[kind.key]
+            for k, term in enumerate(kind.terms):
+                if interaction is None or not term.shown(sim):
+                    out[term.key] = []
+                elif k == 0:
+                    out[term.key] = [sim.ledger.part(b, interaction.energy[b.lo:b.hi])]
+                else:
+                    out[term.key] = [sim.ledger.totals[term.key][b.index].sums()[0]]
+        return out
 
+    def columns(self, state, reduction) -> list:
+        """The present interactions' history series (Kind.columns), as functions that give
+        them once `reduction` is reduced."""
+        return [kind.columns(self.by_kind[kind.key], state, reduction) for kind in KINDS
+                if kind.columns and self.by_kind[kind.key] is not None]
 
-def add_frequencies(present: list, into: np.ndarray) -> None:
-    """into = the sum of the present interactions' bounds (after their evaluation), for more
-    than one."""
-    if len(present) > 1:
-        into[:] = present[0].omega2
-        for interaction in present[1:]:
-            into += interaction.omega2
-
-
-def columns(sim, reduction) -> list:
-    """The present interactions' history series (Kind.columns), as functions that give them
-    once `reduction` is reduced."""
-    return [kind.columns(sim, reduction) for kind in KINDS if kind.columns and sim.interaction[kind.key] is not None]
-
-
-def checkpoint(present: list) -> dict:
-    """What the present interactions keep in a checkpoint's totals (collective)."""
-    return {k: v for interaction in present for k, v in interaction.checkpoint().items()}
+    def checkpoint(self) -> dict:
+        """What the present interactions keep in a checkpoint's totals (collective)."""
+        return {k: v for interaction in self.present for k, v in interaction.checkpoint().items()}

@@ -93,15 +93,15 @@ class KernelRelation:
             return bool(self.every) and self.since >= self.every
         return bool(self.strain) and strain > self.strain
 
-    def rows(self, sim) -> np.ndarray | None:
+    def rows(self, state) -> np.ndarray | None:
         """Its bodies' rows of the owned points of the particles and then each other set
         (None: all of them, it holds every body)."""
         if self.whole:
             return None
         rows, start = [], 0
-        for points in sim.point_sets():
+        for points in state.point_sets():
             for b in self.bodies:
-                lo, hi = (b.lo, b.hi) if points is sim.particles else b.set_rows[points.name]
+                lo, hi = (b.lo, b.hi) if points is state.particles else b.set_rows[points.name]
                 rows.append(np.arange(start + lo, start + hi))
             start += points.n_owned
         return np.concatenate(rows)

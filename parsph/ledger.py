@@ -15,14 +15,12 @@ change that no external force explains (parsph.balance_check).
 from __future__ import annotations
 
 import numpy as np
-
-from parsph import conditions, interactions
-from parsph.interactions import TERMS
 from numba import njit
 
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.fields import MOMENT_COMPONENTS, Field, register
 from parsph.formulations import tlsph
+from parsph.interactions import RUNNING as INTERACTION_RUNNING, TERMS
 from parsph.materials import damage
 
 RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
@@ -30,7 +28,7 @@ RUNNING = ("hourglass_work",  # absorbed by the "paper" hourglass forces
            "damping_work",  # taken by the mass-proportional damping (time.damping)
            "hourglass_released",  # penalty dropped at reference updates, broken pairs and falling moduli
            "damage_released",  # strain energy and plastic work broken pairs release from intact particles
-           "external_work") + interactions.RUNNING  # contact's and the ties' works, the ties' released energy
+           "external_work") + INTERACTION_RUNNING  # contact's and the ties' works, the ties' released energy
 
 
 register(Field("viscous_heat", "scalar", owner="viscosity",
@@ -84,9 +82,9 @@ class Ledger:
         share = self.share[b.lo:b.hi]
         return values * (share if values.ndim == 1 else share.reshape((-1,) + (1,) * (values.ndim - 1)))
 
-    def masses(self, sim) -> np.ndarray:
+    def masses(self, state) -> np.ndarray:
         """The particles' masses as the sums of the balance count them (by their share)."""
-        return sim.mass if self.share is None else sim.mass[: sim.n_owned] * self.share
+        return state.mass if self.share is None else state.mass[: state.n_owned] * self.share
 
     def restore(self, carried: dict) -> None:
         """The global totals of a checkpoint (rank 0 carries them); a total the checkpoint
@@ -105,50 +103,50 @@ class Ledger:
         return {name: [s.to_json() for s in values] if count > 1 else values[0].to_json()
                 for name, values in zip(self.totals, per_body)}
 
-    def damp(self, sim, factor: float) -> None:
+    def damp(self, state, bcs, factor: float) -> None:
         """Scale the owned velocities by `factor` (time.damping over a half step) and add the
         kinetic energy it takes to the damping work; prescribed components are left out (the
         constraints set them again)."""
-        n = sim.n_owned
-        v = sim.v[:n]
+        n = state.n_owned
+        v = state.v[:n]
         before = v * v
         v *= factor
-        self.add("damping_work", np.where(sim.bcs.mask, 0.0, 0.5 * sim.mass[:n, None] * (before - v * v)))
+        self.add("damping_work", np.where(bcs.mask, 0.0, 0.5 * state.mass[:n, None] * (before - v * v)))
 
     @staticmethod
-    def give_heat(sim) -> None:
+    def give_heat(state) -> None:
         """The heat the artificial viscosity dissipated in the last step (trapezoidal in its
         power) into the committed state of each particle whose law keeps one (the heat column
         of the plastic laws: materials.law.Plastic), per unit reference volume. It is not a term of the
         balance: the viscous work already counts it, as the plastic work counts its heat.
         After the commit, so that the stress evaluation depends on the committed state alone
         (a restart from a checkpoint evaluates the same)."""
-        if not sim.viscous:
+        if not state.viscous:
             return
-        heat = sim.particles.owned("viscous_heat")
-        for b in sim.bodies:
+        heat = state.particles.owned("viscous_heat")
+        for b in state.bodies:
             if b.law.plastic is not None:
-                state = sim.material_state(b)[0]
-                state[b.lo:b.hi, b.law.plastic.heat] += heat[b.lo:b.hi] / sim.volume[b.lo:b.hi]
+                held = state.material_state(b)[0]
+                held[b.lo:b.hi, b.law.plastic.heat] += heat[b.lo:b.hi] / state.volume[b.lo:b.hi]
         heat[:] = 0.0
 
-    def begin(self, sim) -> None:
+    def begin(self, state, conditions, interactions) -> None:
         """Keep what the step's works need from its start (after the commit, before the kick)."""
-        n = sim.n_owned
-        self._start = dict(u=sim.u[:n].copy(), v=sim.v[:n].copy() if sim.bcs.moving or sim.collocation else None,
-                           f_hg=sim.f_hg.copy(), f_visc=sim.f_visc.copy(), force=sim.force,
-                           dissipation={i.name: i.dissipation.copy() for i in sim.interactions if i.dissipative},
+        n = state.n_owned
+        self._start = dict(u=state.u[:n].copy(), v=state.v[:n].copy() if conditions.bcs.moving or conditions.collocation else None,
+                           f_hg=state.f_hg.copy(), f_visc=state.f_visc.copy(), force=state.force,
+                           dissipation={i.name: i.dissipation.copy() for i in interactions if i.dissipative},
                            external=self.external,
-                           obstacles=None, internal=sim.internal_force, heating=sim.viscous_heating.copy())
+                           obstacles=None, internal=state.internal_force, heating=state.viscous_heating.copy())
 
-    def in_flight(self, sim) -> dict:
+    def in_flight(self, state) -> dict:
         """The step's start values of the owned particles (begin, obstacles_moved), named
         "ledger.KEY", to travel with them when a reference update inside the step (an
         Eulerian kernel's search) repartitions them; {} between steps."""
         if self._start is None:
             return {}
-        per_particle = {"u", "force", "external", "internal"} | ({"f_hg"} if sim.hourglass else set()) | (
-            {"f_visc", "heating"} if sim.viscous else set())
+        per_particle = {"u", "force", "external", "internal"} | ({"f_hg"} if state.hourglass else set()) | (
+            {"f_visc", "heating"} if state.viscous else set())
         out = {}
         for key, value in self._start.items():
             if key == "obstacles" and value is not None:
@@ -175,45 +173,45 @@ class Ledger:
         if parts:
             self._start["obstacles"] = tuple(parts[k] for k in sorted(parts))
 
-    def obstacles_moved(self, sim, v_half: np.ndarray, u_drift: np.ndarray) -> None:
+    def obstacles_moved(self, state, v_half: np.ndarray, u_drift: np.ndarray) -> None:
         """Keep the changes the obstacles made to the mid-step velocity v_half and the
         drifted displacement u_drift (parsph.walls)."""
-        n = sim.n_owned
-        self._start["obstacles"] = (v_half, sim.v[:n] - v_half, sim.u[:n] - u_drift)
+        n = state.n_owned
+        self._start["obstacles"] = (v_half, state.v[:n] - v_half, state.u[:n] - u_drift)
 
-    def end(self, sim, dt: float) -> None:
+    def end(self, state, conditions, interactions, t: float, dt: float) -> None:
         """Add the step's works (after the second kick): the paper hourglass forces', the
         viscous forces', contact damping's and friction's (all absorbed), the external
         forces' and obstacles', and the work that changes the kinetic energy of a
         prescribed motion."""
-        n, start = sim.n_owned, self._start
-        du = sim.u[:n] - start["u"]
-        for b in sim.bodies:
+        n, start = state.n_owned, self._start
+        du = state.u[:n] - start["u"]
+        for b in state.bodies:
             if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER:  # not a potential force
-                work = -0.5 * (start["f_hg"][b.lo:b.hi] + sim.f_hg[b.lo:b.hi]) * du[b.lo:b.hi]
+                work = -0.5 * (start["f_hg"][b.lo:b.hi] + state.f_hg[b.lo:b.hi]) * du[b.lo:b.hi]
                 self.totals["hourglass_work"][b.index].add(work)
-        if sim.viscous:
-            self.add("viscous_work", -0.5 * (start["f_visc"] + sim.f_visc) * du)
-            sim.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + sim.viscous_heating)
-        for interaction in sim.interactions:  # contact damping's and friction's, the ties' dashpots'
+        if state.viscous:
+            self.add("viscous_work", -0.5 * (start["f_visc"] + state.f_visc) * du)
+            state.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + state.viscous_heating)
+        for interaction in interactions:  # contact damping's and friction's, the ties' dashpots'
             if interaction.name in start["dissipation"]:
                 self.add(interaction.work, -0.5 * (start["dissipation"][interaction.name] + interaction.dissipation)
                          * du)
-        self.external = conditions.external_force(sim)
+        self.external = conditions.external_force(state, t)
         work = 0.5 * (start["external"] + self.external) * du
         if start["obstacles"] is not None:
-            work = work + self._obstacle_work(sim, dt, *start["obstacles"], start["force"])
+            work = work + self._obstacle_work(state, dt, *start["obstacles"], start["force"])
         self.add("external_work", work)
         if start["v"] is not None:
-            v, v_old = sim.v[:n], start["v"]
-            self.add("external_work", np.where(sim.bcs.mask, 0.5 * sim.mass[:n, None] * (v * v - v_old * v_old), 0.0))
-        A = sim.particles.arrays
-        add_impulses(dt, start["internal"], sim.internal_force, sim.X[:n] + start["u"], sim.X[:n] + sim.u[:n],
-                     A["internal_impulse"], A["internal_angular_impulse"].reshape(len(sim.X), MOMENT_COMPONENTS[sim.dim]))
+            v, v_old = state.v[:n], start["v"]
+            self.add("external_work", np.where(conditions.bcs.mask, 0.5 * state.mass[:n, None] * (v * v - v_old * v_old), 0.0))
+        A = state.particles.arrays
+        add_impulses(dt, start["internal"], state.internal_force, state.X[:n] + start["u"], state.X[:n] + state.u[:n],
+                     A["internal_impulse"], A["internal_angular_impulse"].reshape(len(state.X), MOMENT_COMPONENTS[state.dim]))
         self._start = None
 
     @staticmethod
-    def _obstacle_work(sim, dt: float, v_half: np.ndarray, dv: np.ndarray, du: np.ndarray,
+    def _obstacle_work(state, dt: float, v_half: np.ndarray, dv: np.ndarray, du: np.ndarray,
                        force_old: np.ndarray) -> np.ndarray:
         """The work of the obstacles in the step (per particle and component) as the
         kick-drift-kick scheme sees it: the kinetic energy their velocity change dv takes
@@ -221,8 +219,8 @@ class Ledger:
         and the work -(f_n + f_(n+1))/2 . du of the step's forces over the displacement du by
         which they put particles back on their surfaces (zero where there was no contact).
         For a particle held at rest on a wall it is zero."""
-        kinetic = 0.5 * sim.mass[: sim.n_owned, None] * dv * (2.0 * v_half + dv)
-        return kinetic + 0.5 * dt * sim.force * dv - 0.5 * (force_old + sim.force) * du
+        kinetic = 0.5 * state.mass[: state.n_owned, None] * dv * (2.0 * v_half + dv)
+        return kinetic + 0.5 * dt * state.force * dv - 0.5 * (force_old + state.force) * du
 
     def items(self, sim) -> dict:
         """What this rank sums for each term of each body (arrays, or exact_sum.Exact running
@@ -232,22 +230,22 @@ class Ledger:
         released from the intact ones), viscous work, hourglass (the
         particles' penalty, the work absorbed on this rank by the paper form, the penalty
         released since), damping work, external work and the interactions' terms
-        (interactions.energies: contact's, each particle's half of its pairs' potential, its
+        (interactions.Interactions.energies: contact's, each particle's half of its pairs' potential, its
         work; the ties')."""
         out = {term.key: [] for term in TERMS}
-        for b in sim.bodies:
+        for b in sim.state.bodies:
             lo, hi = b.lo, b.hi
             acc = {name: accs[b.index].sums()[0] for name, accs in self.totals.items()}
-            out["strain"].append([self.part(b, b.formulation.integrated(sim, b, lambda A: A["psi"]))])
+            out["strain"].append([self.part(b, b.formulation.integrated(sim.state, b, lambda A: A["psi"]))])
             out["plastic"].append([] if not b.law.plastic else [self.part(b, b.formulation.integrated(
-                sim, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work]))])
-            out["damage"].append([] if not b.failure else [self.part(b, sim.volume[lo:hi] * _damage_work(sim, b)),
+                sim.state, b, lambda A, b=b: A[b.law.state + "_trial"][:, b.law.plastic.work]))])
+            out["damage"].append([] if not b.failure else [self.part(b, sim.state.volume[lo:hi] * _damage_work(sim.state, b)),
                                                            acc["damage_released"]])
             out["viscous"].append([acc["viscous_work"]])
-            out["hourglass"].append([self.part(b, sim.hg_psi[lo:hi]), acc["hourglass_work"], acc["hourglass_released"]])
+            out["hourglass"].append([self.part(b, sim.state.hg_psi[lo:hi]), acc["hourglass_work"], acc["hourglass_released"]])
             out["damping"].append([acc["damping_work"]])
             out["external"].append([acc["external_work"]])
-            for key, parts in interactions.energies(sim, b).items():
+            for key, parts in sim.interactions.energies(sim, b).items():
                 out[key].append(parts)
         return out
 
@@ -256,41 +254,41 @@ class Ledger:
         return float(sum((sum(totals(body), Exact(0)) for body in self.items(sim)[key]), Exact(0)))
 
 
-def _damage_work(sim, b) -> np.ndarray:
+def _damage_work(state, b) -> np.ndarray:
     """W - psi - w_p at `b`'s owned particles that are damaged (0 at the others): the work
     they have taken (materials.damage) beyond their strain energy and, with a plastic law,
     their plastic work (counted as such), since they were first damaged (start_damage_work)."""
     lo, hi = b.lo, b.hi
-    trial = sim.damage_state(b)[1]
+    trial = state.damage_state(b)[1]
     rows = np.arange(lo, hi)
-    return np.where(trial[lo:hi, damage.DAMAGE] > 0.0, trial[lo:hi, damage.WORK] - law_work(sim, b, rows, 1), 0.0)
+    return np.where(trial[lo:hi, damage.DAMAGE] > 0.0, trial[lo:hi, damage.WORK] - law_work(state, b, rows, 1), 0.0)
 
 
-def law_work(sim, b, rows: np.ndarray, which: int = 0) -> np.ndarray:
+def law_work(state, b, rows: np.ndarray, which: int = 0) -> np.ndarray:
     """psi + w_p at the owned `rows` of body `b`: its law's strain energy of the last
     evaluation and its plastic work (committed, `which` 0, or trial, 1)."""
-    out = sim.psi[rows]
+    out = state.psi[rows]
     if b.law.plastic:
-        out = out + sim.material_state(b)[which][rows, b.law.plastic.work]
+        out = out + state.material_state(b)[which][rows, b.law.plastic.work]
     return out
 
 
-def intact_law_work(sim) -> np.ndarray:
+def intact_law_work(state) -> np.ndarray:
     """V^0 (psi + w_p) (trial) at the owned particles of the bodies with a failure model
     whose committed damage is 0 (0 at the others): what a break of pairs can release from
     them (failure.Failure.break_pairs)."""
-    out = np.zeros(sim.n_owned)
-    for b in (b for b in sim.bodies if b.failure):
+    out = np.zeros(state.n_owned)
+    for b in (b for b in state.bodies if b.failure):
         rows = np.arange(b.lo, b.hi)
-        intact = sim.damage_state(b)[0][rows, damage.DAMAGE] == 0.0
-        out[rows[intact]] = sim.volume[rows[intact]] * law_work(sim, b, rows[intact], 1)
+        intact = state.damage_state(b)[0][rows, damage.DAMAGE] == 0.0
+        out[rows[intact]] = state.volume[rows[intact]] * law_work(state, b, rows[intact], 1)
     return out
 
 
-def start_damage_work(sim, b, rows: np.ndarray) -> None:
+def start_damage_work(state, b, rows: np.ndarray) -> None:
     """The owned `rows` of body `b` have just been damaged (at a step's start, after the
     commit): their work taken W (committed damage state) becomes psi + w_p, so that their
     damage work starts at zero and counts only what the damaged stress does differently;
     the integration error of W against the law's energies before (trapezoidal rule against
     the law's own increments) does not enter the balance, as for a body without damage."""
-    sim.damage_state(b)[0][rows, damage.WORK] = law_work(sim, b, rows)
+    state.damage_state(b)[0][rows, damage.WORK] = law_work(state, b, rows)

@@ -186,7 +186,7 @@ class Recorder:
 
     def __init__(self, sim):
         self.calls: list[Call] = []
-        self.labels = {stage.run.__code__: stage.name for body in sim.bodies for stage in body.stages}
+        self.labels = {stage.run.__code__: stage.name for body in sim.state.bodies for stage in body.stages}
         self.labels[type(sim.stable).limit.__code__] = "stable step"
         self.labels[type(sim.topology).move.__code__] = "reference update"
         self.labels[type(sim).step.__code__] = "integration"
@@ -376,7 +376,7 @@ class Profile:
         names = list(worst)
         local = np.array([[self.flops.get(k, 0.0), self.bytes.get(k, 0)] for k in names] or np.zeros((0, 2)))
         held = sum(a.nbytes for _, a in arrays_held(sim))
-        counts = np.array([sim.n_owned, sim.topology.pair_count(), held], float)
+        counts = np.array([sim.state.n_owned, sim.topology.pair_count(), held], float)
         if comm.size > 1:
             local = comm.allreduce(local)
             counts = comm.allreduce(counts)

@@ -42,18 +42,18 @@ def _read(path: str, every: bool = False) -> Callable:
 
 
 def _zeros_without_contact(sim, sel):
-    return sim.contact.force[sel] if sim.contact else np.zeros((len(sel), sim.dim))
+    return sim.interactions.contact.force[sel] if sim.interactions.contact else np.zeros((len(sel), sim.state.dim))
 
 
 _BUILT_IN = (
-    Quantity("displacement", "vector", "m", compute=lambda sim, sel: sim.u[sel]),
-    Quantity("velocity", "vector", "m/s", compute=lambda sim, sel: sim.v[sel]),
-    Quantity("position", "point", "m", compute=lambda sim, sel: sim.X[sel] + sim.u[sel]),
+    Quantity("displacement", "vector", "m", compute=lambda sim, sel: sim.state.u[sel]),
+    Quantity("velocity", "vector", "m/s", compute=lambda sim, sel: sim.state.v[sel]),
+    Quantity("position", "point", "m", compute=lambda sim, sel: sim.state.X[sel] + sim.state.u[sel]),
     Quantity("reaction", "vector", "N", doc="force the constraints exert",
-             compute=_read("conditions.reaction", every=True)),
+             compute=lambda sim, sel: sim.conditions.reaction(sim.state)[sel]),
     Quantity("force", "vector", "N", doc="internal, hourglass and body force",
-             compute=lambda sim, sel: sim.force[sel]),
-    Quantity("J", "scalar", "1", doc="volume ratio det F", compute=lambda sim, sel: sim.J[sel]),
+             compute=lambda sim, sel: sim.state.force[sel]),
+    Quantity("J", "scalar", "1", doc="volume ratio det F", compute=lambda sim, sel: sim.state.J[sel]),
     Quantity("von_mises", "scalar", "Pa", compute=_read("readouts.von_mises")),
     Quantity("disorder", "scalar", "1", doc="hourglass error [G eq. 26]",
              compute=_read("readouts.disorder", every=True)),
@@ -61,16 +61,16 @@ _BUILT_IN = (
              compute=_read("readouts.spacing_ratio", every=True)),
     Quantity("rank", "rank", "1", probe=False, doc="owner rank",
              compute=lambda sim, sel: np.full(len(sel), sim.comm.rank, np.int32)),
-    Quantity("reference_position", "point", "m", probe=False, compute=lambda sim, sel: sim.X[sel]),
+    Quantity("reference_position", "point", "m", probe=False, compute=lambda sim, sel: sim.state.X[sel]),
     Quantity("cauchy_stress", "tensor", "Pa", probe=False, compute=_read("readouts.cauchy_stress")),
     Quantity("contact_force", "vector", "N", doc="force from other bodies' particles (parsph.contact)",
              compute=_zeros_without_contact),
     Quantity("body", "scalar", "1", probe=False, doc="index of the particle's body, in the scene's order",
-             compute=lambda sim, sel: sim.body[sel].astype(float)),
+             compute=lambda sim, sel: sim.state.body[sel].astype(float)),
     Quantity("deformation_gradient", "tensor", "1", probe=False, doc="F, from the initial configuration",
-             compute=lambda sim, sel: sim.F[sel]),
-    Quantity("mass", "scalar", "kg", compute=lambda sim, sel: sim.mass[sel]),
-    Quantity("volume", "scalar", "m^3", doc="reference volume V^0", compute=lambda sim, sel: sim.volume[sel]),
+             compute=lambda sim, sel: sim.state.F[sel]),
+    Quantity("mass", "scalar", "kg", compute=lambda sim, sel: sim.state.mass[sel]),
+    Quantity("volume", "scalar", "m^3", doc="reference volume V^0", compute=lambda sim, sel: sim.state.volume[sel]),
 )
 BUILT_IN = {q.name: q for q in _BUILT_IN}
 

@@ -20,12 +20,12 @@ from parsph.materials import update
 def quantity(sim, name: str, sel: np.ndarray | None = None) -> np.ndarray:
     """A particle quantity on the owned particles `sel` (all of them if None): computed as
     parsph.quantities registers it, or a registered field's values."""
-    sel = np.arange(sim.n_owned) if sel is None else sel
+    sel = np.arange(sim.state.n_owned) if sel is None else sel
     q = quantities.BUILT_IN.get(name)
     if q is not None and q.compute is not None:
         return q.compute(sim, sel)
     if fields.known(name) and fields.get(name).units is not None:  # a registered field
-        return sim.particles.arrays[name][sel]
+        return sim.state.particles.arrays[name][sel]
     known = quantities.snapshot_names()
     close = difflib.get_close_matches(str(name), known, n=1)
     raise InputError(f"unknown quantity {name!r}{f' (did you mean {close[0]!r}?)' if close else ''}; the known "
@@ -36,34 +36,34 @@ def quadrature(sim) -> tuple:
     """(X, F, w): reference positions, deformation gradients and quadrature weights of
     this rank's owned integration points, body after body (the particles for the nodal
     methods; particles, stress or Gauss points for the Galerkin ones)."""
-    parts = [q for b in sim.bodies for q in b.formulation.quadrature(sim, b)]
+    parts = [q for b in sim.state.bodies for q in b.formulation.quadrature(sim.state, b)]
     return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
 
 
 def disorder(sim) -> np.ndarray:
     """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
-    error = tlsph.hourglass_error(sim.dim)
-    return by_relation(sim, lambda ref, out: error(sim.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, sim.d, sim.fs, out,
-                                                   sim.scratch33))
+    error = tlsph.hourglass_error(sim.state.dim)
+    return by_relation(sim, lambda ref, out: error(sim.state.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, sim.state.d, sim.state.fs, out,
+                                                   sim.state.scratch33))
 
 
 def spacing_ratio(sim) -> np.ndarray:
     """Current-configuration disorder of each owned particle (tlsph.spacing_ratio), with the
     ghosts where the last force evaluation saw them."""
-    x = sim.Xr + sim.d if sim.updated else sim.X + sim.u
-    return by_relation(sim, lambda ref, out: tlsph.spacing_ratio(sim.n_owned, ref.ptr, ref.idx, x, sim.measure,
-                                                                 sim.F, sim.dim, out, sim.scratch33))
+    x = sim.state.Xr + sim.state.d if sim.state.updated else sim.state.X + sim.state.u
+    return by_relation(sim, lambda ref, out: tlsph.spacing_ratio(sim.state.n_owned, ref.ptr, ref.idx, x, sim.state.measure,
+                                                                 sim.state.F, sim.state.dim, out, sim.state.scratch33))
 
 
 def by_relation(sim, fill) -> np.ndarray:
     """A value per owned particle that `fill(ref, out)` writes row by row from a kernel
     relation's reference data: each body's rows from its own relation."""
-    out = np.empty(sim.n_owned)
+    out = np.empty(sim.state.n_owned)
     for r in sim.topology.relations:
         if r.whole:
             fill(r.ref, out)
             continue
-        part = np.empty(sim.n_owned)
+        part = np.empty(sim.state.n_owned)
         fill(r.ref, part)
         for b in r.bodies:
             out[b.lo:b.hi] = part[b.lo:b.hi]
@@ -75,24 +75,24 @@ def cauchy_stress(sim, sel: np.ndarray, full: bool = False) -> np.ndarray:
     committed state: the stress of the last evaluation) and its failure model: the dim x dim
     block, or (full) all 3 x 3 components, the out-of-plane ones of plane strain (2D) and
     uniaxial strain (1D) included (the law evaluated with F padded by unit stretches)."""
-    d = 3 if full else sim.dim
+    d = 3 if full else sim.state.dim
     F = np.zeros((len(sel), d, d))
-    F[:, :sim.dim, :sim.dim] = sim.F[sel]
-    for a in range(sim.dim, d):
+    F[:, :sim.state.dim, :sim.state.dim] = sim.state.F[sel]
+    for a in range(sim.state.dim, d):
         F[:, a, a] = 1.0
     P = np.empty_like(F)
-    body = sim.body[sel]
-    for b in sim.bodies:
-        rows = np.arange(len(sel)) if len(sim.bodies) == 1 else np.flatnonzero(body == b.index)
-        state = np.ascontiguousarray(sim.material_state(b)[0][sel[rows]]) if b.law.state else sim.no_state
+    body = sim.state.body[sel]
+    for b in sim.state.bodies:
+        rows = np.arange(len(sel)) if len(sim.state.bodies) == 1 else np.flatnonzero(body == b.index)
+        state = np.ascontiguousarray(sim.state.material_state(b)[0][sel[rows]]) if b.law.state else sim.state.no_state
         part = np.empty_like(F[rows])
         update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), d, b.constants.values, state,
                         state.copy(), part, np.empty(len(rows)), sim.step_dt)
         if b.failure:
             materials.FAILURES[b.failure].stresses(part, np.ascontiguousarray(F[rows]), d,
-                                                   np.ascontiguousarray(sim.damage_state(b)[0][sel[rows]]))
+                                                   np.ascontiguousarray(sim.state.damage_state(b)[0][sel[rows]]))
         P[rows] = part
-    return np.einsum("nab,ncb->nac", P, F) / sim.J[sel, None, None]
+    return np.einsum("nab,ncb->nac", P, F) / sim.state.J[sel, None, None]
 
 
 def von_mises(sim, sel: np.ndarray) -> np.ndarray:
@@ -106,11 +106,11 @@ def wall_forces(sim) -> np.ndarray:
     """Each wall's and tool's force on the body in the last step, (obstacles, dim), exact
     sums over all ranks (collective)."""
     sums = allsum(sim.comm, sim.walls.force_sums())
-    return np.array([float(s) for s in sums]).reshape(len(sim.walls.items), sim.dim)
+    return np.array([float(s) for s in sums]).reshape(len(sim.walls.items), sim.state.dim)
 
 
 def surface_torques(sim) -> np.ndarray:
     """Each surface's torque about its centre in the last step, (surfaces, 1 in 2D or 3),
     exact sums over all ranks (collective)."""
     sums = allsum(sim.comm, sim.walls.torque_sums())
-    return np.array([float(s) for s in sums]).reshape(len(sim.walls.torques), 1 if sim.dim == 2 else 3)
+    return np.array([float(s) for s in sums]).reshape(len(sim.walls.torques), 1 if sim.state.dim == 2 else 3)

@@ -6,7 +6,7 @@ velocity-Verlet (kick-drift-kick leap-frog):
         declarations require (an Eulerian kernel moves its reference inside) -> a
     v += dt/2 a;  constrained v;  the step's works            (ledger)
     the next step's size; a reference update if one is due    (stability, topology)
-The state lives in the bodies and point sets (parsph.state); sums over particles are exact
+The rank's particles live in its state (parsph.state.RankState); sums over particles are exact
 (exact_sum), so that the history, like the particle state, is the same bit for bit on any
 number of ranks.
 """
@@ -19,19 +19,20 @@ import time
 
 import numpy as np
 
-from parsph import interactions, readouts
+from parsph import readouts
 from parsph.bc import apply_initial_conditions
-from parsph.conditions import (external_force, free_rigid_bodies, prescribe_displacement,
-                               prescribe_velocity)
+from parsph.conditions import Conditions
 from parsph.diagnostics import history_row
 from parsph.errors import ParsphError
 from parsph.failure import Failure
 from parsph.ledger import Ledger
-from parsph.parallel.decomposition import LocalBody
+from parsph.interactions import Interactions
+from parsph.kernel_relation import Configuration
+from parsph.parallel.decomposition import Decomposition, LocalBody
+from parsph.parallel.mirrors import add_images
 from parsph.parallel.runtime import collective
-from parsph.points import PointSet
 from parsph.stability import StableStep, check_hourglass_stiffness
-from parsph.state import Body, adopt, refresh, settle
+from parsph.state import Body, RankState
 from parsph.topology import Topology
 from parsph.walls import Walls
 
@@ -44,38 +45,34 @@ class Simulation:
         partitioned); `restart` (io.checkpoint.load: clock and totals) continues a run."""
         self.scene = scene
         self.comm = comm
-        self.dim = dim = scene.scene.dimension
-        specs = scene.bodies
-        offsets = local.offsets if local.offsets is not None else np.array([0, local.total])
-        self.offsets = np.asarray(offsets, np.int64)
-        self.bodies = [Body(b, spec, int(self.offsets[b]), int(self.offsets[b + 1]), dim)
-                       for b, spec in enumerate(specs)]
-        self.failure = Failure(self.bodies, dim, comm, restart["cut"] if restart else None)
-        self.topology = Topology(scene, self.bodies, local, comm)
-        settle(self)
-        self.rebalance = scene.parallel.rebalance
-        self.group_names = sorted(scene.groups)
+        dim = scene.scene.dimension
+        offsets = np.asarray(local.offsets if local.offsets is not None else [0, local.total], np.int64)
+        bodies = [Body(b, spec, int(offsets[b]), int(offsets[b + 1]), dim)
+                  for b, spec in enumerate(scene.bodies)]
+        # the step allowed by the particles' motion is limited by contact and surfaces (and viscosity)
+        limited = bool(scene.contact or scene.surfaces)
+        self.state = state = RankState(bodies, dim, comm, sorted(scene.groups), limited)
+        state.offsets = offsets
+        self.failure = Failure(bodies, dim, comm, restart["cut"] if restart else None)
+        self.topology = Topology(scene, bodies, local, comm)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
-        body_acc = scene.loads.body_acceleration
-        self.body_acc = None if body_acc is None else np.asarray(body_acc)
-        self.damping = scene.time.damping
         self.t = restart["clock"]["t"] if restart else 0.0  # the constraints in force depend on it
         self.step_count = 0
         self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
-        self.ledger = Ledger(self.bodies)
+        self.ledger = Ledger(bodies)
         self.stable = StableStep(scene.time)
         self.walls = Walls(scene.walls, scene.tools, dim, scene.surfaces, scene.parameters)
-        self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
-        adopt(self, local)
-        check_hourglass_stiffness(self)
-        n = self.n_owned
+        self.conditions = Conditions(scene)
+        self.adopt(local)
+        check_hourglass_stiffness(state, self.topology)
+        n = state.n_owned
         if restart is None:
             with collective(comm):
-                apply_initial_conditions(scene.initial, self.groups, self.X[:n], self.gid[:n], self.u[:n],
-                                         self.v[:n], scene.parameters)
-            prescribe_displacement(self, 0.0)
-            prescribe_velocity(self, 0.0)
-        self.rigid_bodies = free_rigid_bodies(self, restart)
+                apply_initial_conditions(scene.initial, state.groups, state.X[:n], state.gid[:n], state.u[:n],
+                                         state.v[:n], scene.parameters)
+            self.conditions.prescribe_displacement(state, 0.0)
+            self.conditions.prescribe_velocity(state, 0.0)
+        self.conditions.free_rigid_bodies(state, restart)
         if restart is not None:
             clock, carried = restart["clock"], restart["totals"]
             self.t, self.step_count = clock["t"], clock["step"]
@@ -86,37 +83,56 @@ class Simulation:
             if comm.rank == 0:  # global totals and the last step's obstacle forces, carried by rank 0
                 self.ledger.restore(carried)
                 self.walls.restore(carried["wall_force"], carried.get("surface_torque", ()))
-        if self.contact is not None and restart is None:
-            self.contact.check_apart(self.gid, self.body, self.X[:n] + self.u[:n], [b.name for b in self.bodies])
+        if self.interactions.contact is not None and restart is None:
+            self.interactions.contact.check_apart(state.gid, state.body, state.X[:n] + state.u[:n],
+                                                  [b.name for b in bodies])
         self.compute_forces()
-        self.ledger.external = external_force(self)  # at the current state, for the work integral
-        self.stable.start(self, restart["clock"] if restart else None)
+        self.ledger.external = self.conditions.external_force(state, self.t)  # for the work integral
+        self.stable.start(state, self.topology, self.interactions, self.step_count, self.t,
+                          restart["clock"] if restart else None)
 
-    def material_state(self, body: Body, points: str = "particles") -> tuple:
-        """(committed, trial) state arrays of `body`'s material law on a point set (empty
-        arrays for a law without state)."""
-        if body.law.state is None:
-            return self.no_state, self.no_state
-        A = self.point_set(points).arrays
-        return A[body.law.state], A[body.law.state + "_trial"]
+    def adopt(self, local: LocalBody) -> None:
+        """Take `local` (owned particles with two ghost layers and all their arrays) as this
+        rank's particles (at set-up, and after a search of the reference: topology.Topology.move):
+        mirror images across symmetry planes (parallel.mirrors), halo plan, the kernel
+        relations' reference data in the reference configuration (X, or X^r when updated), the
+        rank state's fields (state.RankState.adopt), the formulations' own relations and
+        stages, the conditions and the interactions on them."""
+        state, scene, comm = self.state, self.scene, self.comm
+        updated = state.updated and "Xr" in local.fields
+        ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
+        with collective(comm):
+            local, mirrors = add_images(local, ref[0], scene.symmetry, comm,
+                                        skin=self.topology.skin if state.updated else 0.0)
+            fl, n = local.fields, local.n_owned
+            # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
+            layer2 = self.topology.keeps or self.failure.breaking
+            decomp = Decomposition(local, comm, mirrors, layer2=layer2)
+            self.ledger.share = mirrors.share if mirrors else None  # particles on a plane count by their share
+            body = np.searchsorted(state.offsets, local.gid % local.total, side="right") - 1
+            self.failure.detached = self.failure.failed(fl.get("damage"), body)
+            cut = self.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, self.failure.detached,
+                                         len(scene.symmetry), local.total)
+            self.topology.build(Configuration(fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, body, n,
+                                              decomp.n_rows), detached=self.failure.detached, cut=cut)
+        if not layer2:
+            decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
+        state.adopt(local, decomp, body, len(local.gid) if layer2 else decomp.n_rows)
+        self.failure.find_broken(state)
+        with collective(comm):  # the formulations' own relations
+            for b in state.bodies:
+                b.formulation.build(state, b, b.relation.kernel, self.topology.skin)
+        self.conditions.adopt(state, self.t)
+        self.walls.select(state.groups)
+        self.interactions = Interactions(scene, state, self.ledger, self.topology)  # parsph.interactions
+        self.make_stages()
 
-    def damage_state(self, body: Body) -> tuple:
-        """(committed, trial) damage state arrays of `body`'s particles (empty without damage)."""
-        if not body.failure:
-            return self.no_state, self.no_state
-        return self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
-
-    def exclude_kernel_pairs(self) -> None:
-        """Tell a self-contact the kernel's pairs, which it leaves out (parsph.contact)."""
-        if self.contact:
-            self.contact.exclude(self.topology.kernel_pairs(), self.gid)
-
-    def point_set(self, name: str) -> PointSet:
-        return self.particles if name == "particles" else self.sets[name]
-
-    def point_sets(self) -> list:
-        """The rank's point sets: the particles, then the others (stress points, Gauss points)."""
-        return [self.particles] + list(self.sets.values())
+    def make_stages(self) -> None:
+        """The bodies' stages on the adopted state (formulations.base); a rigid body has none."""
+        for b in self.state.bodies:
+            b.stages = [] if b.rigid else b.formulation.stages(self, b)
+            if b.rigid:
+                self.state.F[b.lo:b.hi] = np.eye(self.state.dim)
 
     # ----------------------------------------------------------------- the step
     def compute_forces(self, move_reference: bool = False) -> None:
@@ -124,27 +140,28 @@ class Simulation:
         values of the fields it reads at neighbours that are stale are refreshed (the
         displacement always: the integrator moved it). With `move_reference` (an Eulerian
         kernel's step) the reference moves to the current configuration once F and the
-        stress are known, before the force row. Sets self.force, of which self.internal_force
-        is the part between particles, and self.acc (owned)."""
-        n = self.n_owned
+        stress are known, before the force row. Sets the state's force, of which
+        internal_force is the part between particles, and acc (owned)."""
+        state = self.state
+        n = state.n_owned
         clock = time.perf_counter
         seconds = self.stage_seconds
         stale = {"d", "v"}  # moved by the integrator (v is refreshed only if a stage reads it)
-        self.step_limit.fill(np.inf)
-        phases = max(len(b.stages) for b in self.bodies)
+        state.step_limit.fill(np.inf)
+        phases = max(len(b.stages) for b in state.bodies)
         k = 0
         while k < phases:
-            phase = [b.stages[k] for b in self.bodies if k < len(b.stages)]
+            phase = [b.stages[k] for b in state.bodies if k < len(b.stages)]
             if move_reference and any(stage.force_row for stage in phase):
                 move_reference = False
-                if self.topology.move(self):  # searched: new arrays, the whole evaluation in the new reference
-                    self.compute_forces()
+                if self._move_reference([r for r in self.topology.relations if r.eulerian]):
+                    self.compute_forces()  # searched: new arrays, the whole evaluation in the new reference
                     return
                 continue  # the same phase, with the stages of the new reference
             reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
             if reads:
                 t0 = clock()
-                refresh(self, reads)
+                state.refresh(reads)
                 stale.difference_update(reads)
                 seconds["halo"] += clock() - t0
             for stage in phase:
@@ -158,41 +175,39 @@ class Simulation:
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
             k += 1
-        internal = self.f_int + self.f_hg if self.hourglass else self.f_int.copy()
-        if self.viscous:
-            internal += self.f_visc
+        internal = state.f_int + state.f_hg if state.hourglass else state.f_int.copy()
+        if state.viscous:
+            internal += state.f_visc
         for interaction in self.interactions:  # parsph.interactions
             t0 = clock()
             reads = [name for name in interaction.reads if name in stale]
             if reads:
-                refresh(self, reads)
+                state.refresh(reads)
                 stale.difference_update(reads)
             try:
-                interaction.evaluate(self.X[:n] + self.u[:n], self.v[:n], self.step_limit)
+                interaction.evaluate(state.X[:n] + state.u[:n], state.v[:n], state.step_limit)
             except ArithmeticError:
                 raise ParsphError(f"{interaction.name} failed at step {self.step_count + 1}, t = {self.t:.6g}: "
                                   f"particles of two bodies coincide; the run is unstable: "
                                   f"{self.stable.advice()}") from None
             internal += interaction.force
             seconds[interaction.name] += clock() - t0
-        interactions.add_frequencies(self.interactions, self.omega_c2)
+        self.interactions.add_frequencies()
         if self.walls.turning:
-            self.walls.limit_steps(self.X[:n] + self.u[:n], self.v[:n], self.t, self.step_limit)
-        self.internal_force = internal  # the forces between particles (ledger: their impulses)
+            self.walls.limit_steps(state.X[:n] + state.u[:n], state.v[:n], self.t, state.step_limit)
+        state.internal_force = internal  # the forces between particles (ledger: their impulses)
         force = internal
-        if self.body_acc is not None or self.tractions:
+        if self.conditions.body_acc is not None or self.conditions.tractions:
             force = internal.copy()
-            if self.body_acc is not None:
-                force += self.mass[:n, None] * self.body_acc
-            if self.tractions:
-                self.tractions.add(force, self.t)
-        self.force = force
-        self.acc = force / self.mass[:n, None]
+            self.conditions.add_loads(state, force, self.t)
+        state.force = force
+        state.acc = force / state.mass[:n, None]
 
     def _kick(self, dt: float) -> None:
-        if self.damping > 0:
-            self.ledger.damp(self, math.exp(-self.damping * dt))
-        self.v[:self.n_owned] += dt * self.acc
+        state = self.state
+        if self.conditions.damping > 0:
+            self.ledger.damp(state, self.conditions.bcs, math.exp(-self.conditions.damping * dt))
+        state.v[:state.n_owned] += dt * state.acc
 
     def step(self, t_end: float = math.inf) -> float:
         """Advance one time step (and update the reference if due); returns the step size.
@@ -200,41 +215,42 @@ class Simulation:
         exactly at t_end."""
         start = time.perf_counter()
         inside = sum(self.stage_seconds.values())
-        n = self.n_owned
+        state, conditions, contact = self.state, self.conditions, self.interactions.contact
+        n = state.n_owned
         dt = self.stable.dt
         t_new = self.t + dt
         if t_new >= t_end * (1.0 - 1e-12):
             dt, t_new = t_end - self.t, t_end
         if not t_new > self.t:
-            raise self.stable.standstill(self)
-        for points in self.point_sets():  # the last evaluation's state is committed
+            raise self.stable.standstill(self.step_count, self.t)
+        for points in state.point_sets():  # the last evaluation's state is committed
             points.commit()
-        self.ledger.give_heat(self)
-        self.failure.advance(self, dt)
+        self.ledger.give_heat(state)
+        self.failure.advance(state, dt)
         if self.failure.breaking:
             self._break_pairs()
-        if self.contact is not None and self.contact.dissipative:  # friction's limit
-            self.contact.dt = dt
-        self.ledger.begin(self)
+        if contact is not None and contact.dissipative:  # friction's limit
+            contact.dt = dt
+        self.ledger.begin(state, conditions, self.interactions)
         self._kick(0.5 * dt)
-        prescribe_velocity(self, self.t + 0.5 * dt)
-        self.u[:n] += dt * self.v[:n]
-        for body in self.rigid_bodies:
-            body.drift(dt, self.X, self.u, self.v, self.F)
+        conditions.prescribe_velocity(state, self.t + 0.5 * dt)
+        state.u[:n] += dt * state.v[:n]
+        for body in conditions.rigid_bodies:
+            body.drift(dt, state.X, state.u, state.v, state.F)
         self.t = t_new
-        prescribe_displacement(self, self.t)
+        conditions.prescribe_displacement(state, self.t)
         if self.walls.items:  # the obstacles' changes of velocity and displacement
-            v_half, u_drift = self.v[:n].copy(), self.u[:n].copy()
-            self.walls.enforce(self.X, self.u, self.v, self.mass, self.t, 0.5 * (self.step_dt + dt),
-                               self.rigid_bodies)
-            self.ledger.obstacles_moved(self, v_half, u_drift)
+            v_half, u_drift = state.v[:n].copy(), state.u[:n].copy()
+            self.walls.enforce(state.X, state.u, state.v, state.mass, self.t, 0.5 * (self.step_dt + dt),
+                               conditions.rigid_bodies)
+            self.ledger.obstacles_moved(state, v_half, u_drift)
         self.step_dt = dt
-        self.compute_forces(move_reference=self.eulerian)
-        if self.contact is not None:
-            self.contact.check_inside(self.gid, self.body, [b.name for b in self.bodies], self.step_count + 1, self.t)
+        self.compute_forces(move_reference=state.eulerian)
+        if contact is not None:
+            contact.check_inside(state.gid, state.body, [b.name for b in state.bodies], self.step_count + 1, self.t)
         self._kick(0.5 * dt)
-        prescribe_velocity(self, self.t)
-        self.ledger.end(self, dt)
+        conditions.prescribe_velocity(state, self.t)
+        self.ledger.end(state, conditions, self.interactions, self.t, dt)
         self.step_count += 1
         self.topology.stepped()
         self.stage_seconds["integration"] += (time.perf_counter() - start
@@ -244,35 +260,56 @@ class Simulation:
         due = self.topology.due()
         if not due or self.topology.by_strain(due):
             clock = time.perf_counter()
-            self.stable.dt, strains = self.stable.next_step(self)
+            self.stable.dt, strains = self._next_step()
             self.stage_seconds["stable step"] += time.perf_counter() - clock
             due = self.topology.due(strains)
         if due:
             self.update_reference(due)
             clock = time.perf_counter()
-            self.stable.dt = self.stable.next_step(self)[0]
+            self.stable.dt = self._next_step()[0]
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
 
+    def _next_step(self) -> tuple:
+        """The next step's size and the relations' strains (stability.StableStep.next_step)."""
+        return self.stable.next_step(self.state, self.topology, self.interactions, self.step_count, self.t)
+
     def update_reference(self, due: list | None = None) -> None:
         """Make the current configuration the reference [V §3.1] of the `due` kernel
-        relations' bodies (None: of every body whose reference moves) between steps
-        (topology.Topology.move) and evaluate the forces in it."""
-        self.topology.move(self, [r for r in self.topology.relations if r.moves] if due is None else due)
+        relations' bodies (None: of every body whose reference moves) between steps and
+        evaluate the forces in it."""
+        self._move_reference([r for r in self.topology.relations if r.moves] if due is None else due)
         self.compute_forces()
-        self.ledger.external = external_force(self)
+        self.ledger.external = self.conditions.external_force(self.state, self.t)
+
+    def _move_reference(self, due: list) -> bool:
+        """The reference update of the `due` kernel relations (topology.Topology.move): the
+        particles of a search adopted, or the collocation and the stages made on what the kept
+        lists rebuilt. Returns whether it searched (the arrays are new)."""
+        start = time.perf_counter()
+        with self.topology.failing(self.step_count, self.t):
+            local = self.topology.move(self.state, self.ledger, due)
+            if local is not None:
+                self.adopt(local)
+        if local is None:
+            self.conditions.recollocate(self.state)
+            self.make_stages()
+        self.topology.moved(self.state, due, local is not None)
+        self.stage_seconds["reference update"] += time.perf_counter() - start
+        return local is not None
 
     def _break_pairs(self) -> None:
         """Pairs of newly failed particles break (failure.Failure.break_pairs) and the forces
         are evaluated on the new pairs, twice where a plastic body keeps its elastic state
         through the change of F; the change does no work (failure.Failure.settle)."""
-        broken = self.failure.break_pairs(self)
+        broken = self.failure.break_pairs(self.state, self.topology, len(self.scene.symmetry))
         if broken is None:
             return
         self.compute_forces()
-        if self.failure.keep_elastic(self, broken):
+        if self.failure.keep_elastic(self.state, broken):
             self.compute_forces()
-        self.failure.settle(self, broken)
+        self.failure.settle(self.state, self.ledger, broken)
+        self.ledger.external = self.conditions.external_force(self.state, self.t)
 
     @property
     def dt(self) -> float:
@@ -282,9 +319,10 @@ class Simulation:
     # ----------------------------------------------------------------- the public read-outs
     def group_index(self, name: str) -> np.ndarray:
         """The owned particles of group `name` (rows)."""
-        if name not in self.groups:
-            raise ParsphError(f"unknown group '{name}'; the scene's groups: {', '.join(sorted(self.groups))}")
-        return np.flatnonzero(self.groups[name])
+        groups = self.state.groups
+        if name not in groups:
+            raise ParsphError(f"unknown group '{name}'; the scene's groups: {', '.join(sorted(groups))}")
+        return np.flatnonzero(groups[name])
 
     def quantity(self, name: str, sel: np.ndarray | None = None) -> np.ndarray:
         """A registered quantity at the owned particles `sel`, or all (readouts.quantity)."""

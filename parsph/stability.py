@@ -30,95 +30,102 @@ class StableStep:
         self.cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up
         self.bound_hourglass = True  # whether the stable step is due after each force evaluation
 
-    def start(self, sim, clock: dict | None) -> None:
-        """The first step's size, or the checkpoint's `clock` (collective)."""
+    def start(self, state, topology, interactions, step: int, t: float, clock: dict | None) -> None:
+        """The first step's size, or the checkpoint's `clock` (collective); the arguments as
+        for limit."""
         settings = self.settings
         if settings.dt > 0:
-            self.cfl_at = (settings.cfl * self.limit(sim)[0], sim.step_count)
-        self.dt = clock["dt"] if clock else self.next_step(sim)[0]
-        self.first = clock.get("first_stable", 0.0) if clock else self.limit(sim)[0]
+            self.cfl_at = (settings.cfl * self.limit(state, topology, interactions, step, t)[0], step)
+        self.dt = clock["dt"] if clock else self.next_step(state, topology, interactions, step, t)[0]
+        self.first = clock.get("first_stable", 0.0) if clock else self.limit(state, topology, interactions, step, t)[0]
         self.floor = settings.step_floor * self.first if self.first < math.inf else 0.0
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
-        self.bound_hourglass = settings.dt == 0 or (sim.updated and sim.topology.adaptive)
+        self.bound_hourglass = settings.dt == 0 or (state.updated and topology.adaptive)
 
-    def next_step(self, sim) -> tuple:
+    def next_step(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(size of the next step, each kernel relation's largest incremental log strain):
         time.dt if fixed, else time.cfl times the stable step; the strains for the adaptive
-        reference update (0 unless it is enabled). Collective."""
+        reference update (0 unless it is enabled); the arguments as for limit. Collective."""
         settings = self.settings
-        adaptive = sim.updated and sim.topology.adaptive
+        adaptive = state.updated and topology.adaptive
         if settings.dt > 0:
-            return settings.dt, self.limit(sim)[1] if adaptive else np.zeros(len(sim.topology.relations))
-        step, strains = self.limit(sim)
-        return settings.cfl * step, strains
+            return settings.dt, self.limit(state, topology, interactions, step, t)[1] if adaptive else \
+                np.zeros(len(topology.relations))
+        size, strains = self.limit(state, topology, interactions, step, t)
+        return settings.cfl * size, strains
 
-    def limit(self, sim) -> tuple:
+    def limit(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(stable step, each kernel relation's largest incremental log strain) over all
-        ranks, from formulations.tlsph.stable_time_step (collective). A step of zero, or
-        below time.step_floor times the first one, raises the error naming the particle
-        with the smallest step on any rank."""
+        ranks of the rank's particles (`state`: state.RankState) in their kernel relations
+        (`topology`) and interactions (their springs: interactions.Interactions), from
+        formulations.tlsph.stable_time_step (collective). A step of zero, or below
+        time.step_floor times the first one, raises the error naming the particle with the
+        smallest step on any rank, at `step` and time t."""
         dt, smallest = np.inf, -1
-        strains = np.zeros(len(sim.topology.relations))
-        for b in sim.bodies:  # in row order: the first particle with the smallest step
+        strains = np.zeros(len(topology.relations))
+        for b in state.bodies:  # in row order: the first particle with the smallest step
             if b.rigid:
-                step, worst, first = rigid.stable_step(b, sim.omega_c2, sim.step_limit, sim.v, sim.contact)
+                size, worst, first = rigid.stable_step(b, interactions.omega2, state.step_limit, state.v, interactions.contact)
             else:
                 ref = b.relation.ref
-                step, worst, first = tlsph.stable_time_step(
-                    b.lo, b.hi, sim.fs if b.moves else sim.F, sim.F, sim.J, ref.min_spacing, ref.stiffening,
-                    b.constants.wave_speed, b.law.law_id, b.constants.values, sim.dim, sim.broken, sim.omega_hg2,
-                    b.formulation.hourglass_form, sim.omega_c2, sim.step_limit, sim.scratch33)
+                size, worst, first = tlsph.stable_time_step(
+                    b.lo, b.hi, state.fs if b.moves else state.F, state.F, state.J, ref.min_spacing, ref.stiffening,
+                    b.constants.wave_speed, b.law.law_id, b.constants.values, state.dim, state.broken, state.omega_hg2,
+                    b.formulation.hourglass_form, interactions.omega2, state.step_limit, state.scratch33)
             if b.moves:  # the strain since a reference that moves
                 strains[b.relation.index] = max(strains[b.relation.index], worst)
-            if step < dt or (first >= 0 and not step > 0.0):
-                dt, smallest = step, first
-            if not step > 0.0:
+            if size < dt or (first >= 0 and not size > 0.0):
+                dt, smallest = size, first
+            if not size > 0.0:
                 break
         reduced = np.array([-dt, *strains])
-        if sim.comm.size > 1:
-            sim.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
+        if state.comm.size > 1:
+            state.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
         if -reduced[0] == math.inf and self.settings.dt > 0:  # nothing bounds a fixed step: it is the user's
             return math.inf, reduced[1:]
         if -reduced[0] == math.inf:
-            why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in sim.bodies)
+            why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in state.bodies)
                    else "every particle has failed completely (damage 1) and carries no stress; the run is stopped, "
                         "as nothing is left to integrate")
-            error = ParsphError(f"no particle sets the stable time step at step {sim.step_count}, t = {sim.t:.6g} s: "
+            error = ParsphError(f"no particle sets the stable time step at step {step}, t = {t:.6g} s: "
                                 f"{why}")
             error.agreed = True  # the same reduction on every rank
             raise error
         if not -reduced[0] > self.floor:
-            raise self.collapsed(sim, -reduced[0], dt, smallest)
+            raise self.collapsed(state, interactions, step, t, -reduced[0], dt, smallest)
         return -reduced[0], reduced[1:]
 
-    def standstill(self, sim) -> ParsphError:
-        """The error for a step too small to advance the clock (below its rounding)."""
-        error = ParsphError(f"the time step {self.dt:.3g} s no longer advances the time t = {sim.t:.6g} s (step "
-                            f"{sim.step_count}): the run would stand still; {self.advice()}")
+    def standstill(self, step: int, t: float) -> ParsphError:
+        """The error for a step too small to advance the clock (below its rounding) at
+        `step`, time t."""
+        error = ParsphError(f"the time step {self.dt:.3g} s no longer advances the time t = {t:.6g} s (step "
+                            f"{step}): the run would stand still; {self.advice()}")
         error.agreed = True  # the same clock on every rank
         return error
 
-    def collapsed(self, sim, step: float, dt: float, smallest: int) -> ParsphError:
-        """The error for a step that has collapsed (below the floor, or zero), naming the
-        particle that sets it and, if it touches another body, both bodies (collective)."""
+    def collapsed(self, state, interactions, step: int, t: float, size: float, dt: float,
+                  smallest: int) -> ParsphError:
+        """The error for a step that has collapsed (below the floor, or zero: `size`; this
+        rank's smallest `dt` at its row `smallest`) at `step`, time t, naming the particle
+        that sets it and, if it touches another body, both bodies (collective)."""
         touching, speed = None, None
-        if smallest >= 0 and sim.contact is not None:
-            touching = sim.contact.partner(smallest)
-        if smallest >= 0 and len(sim.step_limit) and not sim.step_limit[smallest] > dt:  # its motion sets it
-            v = sim.v[smallest]
+        if smallest >= 0 and interactions.contact is not None:
+            touching = interactions.contact.partner(smallest)
+        if smallest >= 0 and len(state.step_limit) and not state.step_limit[smallest] > dt:  # its motion sets it
+            v = state.v[smallest]
             top = float(np.abs(v).max())
             speed = top * float(np.sqrt(np.sum((v / top) ** 2))) if 0.0 < top < np.inf else top  # no overflow
-        mine = [] if smallest < 0 else [(dt, int(sim.gid[smallest]),
-                                         tuple((sim.X[smallest] + sim.u[smallest]).tolist()),
-                                         int(sim.body[smallest]), touching, speed)]
-        _, gid, x, body, touching, speed = min(c for part in sim.comm.allgather(mine) for c in part)
+        mine = [] if smallest < 0 else [(dt, int(state.gid[smallest]),
+                                         tuple((state.X[smallest] + state.u[smallest]).tolist()),
+                                         int(state.body[smallest]), touching, speed)]
+        _, gid, x, body, touching, speed = min(c for part in state.comm.allgather(mine) for c in part)
         where = ", ".join(f"{c:.6g}" for c in x)
-        if not step > 0.0:
+        if not size > 0.0:
             what = "collapsed to zero"
         else:
-            what = (f"fell to {step:.3g} s, below time.step_floor = {self.settings['step_floor']:g} of the first "
+            what = (f"fell to {size:.3g} s, below time.step_floor = {self.settings.step_floor:g} of the first "
                     f"one ({self.first:.3g} s),")
-        names = [b.name for b in sim.bodies]
+        names = [b.name for b in state.bodies]
         if speed is not None:
             why = (f"of body '{names[body]}' moves at {speed:.3g} m/s, and the step in which it closes in on another "
                    f"body or moves a quarter of the contact skin has collapsed: check the initial velocities and "
@@ -130,10 +137,10 @@ class StableStep:
                    f"failed (the bodies are pressed into each other faster than their contact springs can part "
                    f"them); raise contact.stiffness, refine the particles, or slow the impact")
         else:
-            why = (("is flattened (a principal stretch near zero)" if not step > 0.0 else
+            why = (("is flattened (a principal stretch near zero)" if not size > 0.0 else
                     "is the most flattened (its smallest principal stretch sets the step)")
                    + f"; the run is unstable: {self.advice()}")
-        error = ParsphError(f"the stable time step {what} at step {sim.step_count}, t = {sim.t:.6g}: "
+        error = ParsphError(f"the stable time step {what} at step {step}, t = {t:.6g}: "
                             f"particle {gid} at ({where}) {why}")
         error.agreed = True  # every rank found the same particle and raises this
         return error
@@ -159,16 +166,16 @@ def breakdown(J: float) -> str:
 
 def unstable_particle(sim, i: int) -> ParsphError:
     """The error for owned particle i, inverted or with a stress that is not finite."""
-    where = ", ".join(f"{c:.6g}" for c in sim.X[i] + sim.u[i])
+    where = ", ".join(f"{c:.6g}" for c in sim.state.X[i] + sim.state.u[i])
     return ParsphError(
-        f"particle {int(sim.gid[i])} at ({where}) {breakdown(sim.J[i])} at step {sim.step_count + 1}, "
+        f"particle {int(sim.state.gid[i])} at ({where}) {breakdown(sim.state.J[i])} at step {sim.step_count + 1}, "
         f"t = {sim.t:.6g}; the run is unstable: {sim.stable.advice()}")
 
 
 def unstable_point(sim, points: str, q: int) -> ParsphError:
     """The error for owned point q of set `points`, inverted or with a stress that is
     not finite."""
-    A = sim.sets[points].arrays
+    A = sim.state.sets[points].arrays
     where = ", ".join(f"{c:.6g}" for c in A["X"][q])
     what = points[:-1].replace("_", " ")
     return ParsphError(
@@ -176,23 +183,24 @@ def unstable_point(sim, points: str, q: int) -> ParsphError:
         f"{sim.step_count + 1}, t = {sim.t:.6g}; the run is unstable: {sim.stable.advice()}")
 
 
-def check_hourglass_stiffness(sim) -> None:
+def check_hourglass_stiffness(state, topology) -> None:
     """InputError if 2 sum_j c_ij (E_i + E_j) / m_i, the scale of a particle's hourglass
-    frequency squared, overflows (an absurd formulation.hourglass). At set-up."""
-    n = sim.n_owned
-    if not sim.hourglass:
+    frequency squared, overflows (an absurd formulation.hourglass), on the rank's particles
+    (`state`) in their kernel relations (`topology`). At set-up."""
+    n = state.n_owned
+    if not state.hourglass:
         return
     out = np.zeros(n)
-    for ref in (r.ref for r in sim.topology.relations if len(r.ref.hgc)):  # the rows of a relation's bodies
+    for ref in (r.ref for r in topology.relations if len(r.ref.hgc)):  # the rows of a relation's bodies
         rows = np.repeat(np.arange(n), np.diff(ref.ptr))
         with np.errstate(over="ignore", invalid="ignore"):
-            k = ref.hgc * (sim.youngs[rows] + sim.youngs[ref.idx])
-            out += 2.0 * np.bincount(rows, weights=k, minlength=n) / sim.mass[:n]
-    with collective(sim.comm):
+            k = ref.hgc * (state.youngs[rows] + state.youngs[ref.idx])
+            out += 2.0 * np.bincount(rows, weights=k, minlength=n) / state.mass[:n]
+    with collective(state.comm):
         bad = np.flatnonzero(~np.isfinite(out))
         if len(bad):
-            i = bad[np.argmin(sim.gid[bad])]
-            alpha = sim.bodies[sim.body[i]].formulation.alpha
+            i = bad[np.argmin(state.gid[bad])]
+            alpha = state.bodies[state.body[i]].formulation.alpha
             raise InputError(f"formulation.hourglass = {alpha:g}: the hourglass stiffness of particle "
-                             f"{sim.gid[i]} over its mass, {out[i]:g} 1/s^2, overflows the range of double "
+                             f"{state.gid[i]} over its mass, {out[i]:g} 1/s^2, overflows the range of double "
                              "precision ([G] recommends 50)")

@@ -11,17 +11,13 @@ Local arrays hold the owned points first, then the ghosts.
 from __future__ import annotations
 
 import collections
+from dataclasses import dataclass
 
 import numpy as np
 
-from parsph import config, fields, interactions, materials
-from parsph.bc import BoundaryConditions, Tractions
-from parsph.collocation import BoundaryCollocation, collocated
+from parsph import fields, materials
 from parsph.formulations import FORMULATIONS, tlsph
-from parsph.kernel_relation import Configuration
 from parsph.parallel.decomposition import Decomposition, LocalBody
-from parsph.parallel.mirrors import add_images
-from parsph.parallel.runtime import collective
 from parsph.points import PointSet
 
 BASE_FIELDS = tuple(f.name for f in fields.PARTICLE_FIELDS)
@@ -52,149 +48,172 @@ class Body:
         self.stages = []
 
 
-def settle(sim) -> None:
-    """What the bodies settle for the whole particle set: whether a reference moves (in
-    every step: Eulerian), whether some body has Hessian stabilisation or hourglass control
-    (their arrays), and the owners of the registered fields the particles carry
-    (parsph.fields). Each body's kernel, eta and schedule are its kernel relation's
-    (parsph.kernel_relation)."""
-    forms = [b.formulation for b in sim.bodies]
-    moving = [b.formulation for b in sim.bodies if b.moves]  # their reference moves (all ulsph or all Eulerian: config)
-    sim.updated = bool(moving)
-    sim.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
-    sim.eta = max(f.eta for f in forms)  # > 0: some body has Hessian stabilisation (its relation's eta)
-    sim.hourglass = any(f.hourglass_form for f in forms)
-    # the formulations, laws and their states, the updated reference and damage the bodies use
-    sim.owners = {f.type for f in forms} | {b.law.name for b in sim.bodies} | {b.law.state for b in sim.bodies}
-    if sim.updated:
-        sim.owners.add("updated")
-    if any(b.failure for b in sim.bodies):
-        sim.owners.add("damage")
-    if any(any(getattr(f, "viscosity", ())) for f in forms):
-        sim.owners.add("viscosity")
-    sim.carried = fields.carried(sim.owners)  # the registered fields the particles carry
+@dataclass(frozen=True)
+class Work:
+    """A work array of the rank beside the carried fields: on the `rows` "local" (owned and
+    ghosts: neighbours read it) or "owned", of one point's `shape` (scalar (), "vector" (dim,),
+    "tensor" (dim, dim), "none" (0,)), allocated where the bodies `need` it (a flag of
+    RankState; with none of its rows otherwise), filled with `fill`."""
+
+    name: str
+    rows: str
+    shape: str = "scalar"
+    need: str | None = None
+    fill: float = 0.0
+    dtype: type = np.float64
 
 
-def adopt(sim, local: LocalBody) -> None:
-    """Take `local` (owned particles with two ghost layers and all their arrays) as this
-    rank's particles: mirror images across symmetry planes (parallel.mirrors), halo plan,
-    the kernel relations' reference data in the reference configuration (X, or X^r when
-    updated; parsph.topology), the carried
-    fields (parsph.fields) and work arrays for owned particles and layer-1 ghosts."""
-    updated = sim.updated and "Xr" in local.fields
-    ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
-    with collective(sim.comm):
-        local, mirrors = add_images(local, ref[0], sim.scene.symmetry, sim.comm,
-                                    skin=sim.topology.skin if sim.updated else 0.0)
-        fl, n, dim = local.fields, local.n_owned, sim.dim
-        # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
-        layer2 = sim.topology.keeps or sim.failure.breaking
-        sim.decomp = Decomposition(local, sim.comm, mirrors, layer2=layer2)
-        sim.ledger.share = mirrors.share if mirrors else None  # particles on a plane count by their share
-        body = np.searchsorted(sim.offsets, local.gid % local.total, side="right") - 1
-        sim.failure.detached = sim.failure.failed(fl.get("damage"), body)
-        cut = sim.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, sim.failure.detached,
-                                    len(sim.scene.symmetry), local.total)
-        sim.topology.build(Configuration(fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, body, n,
-                                         sim.decomp.n_rows), detached=sim.failure.detached, cut=cut)
-    if layer2:
-        keep = len(local.gid)
-    else:
-        sim.decomp.trim()  # layer-2 ghosts only served to build the ghosts' rows
-        keep = sim.decomp.n_rows
-    sim.n_owned = n
-    sim.gid = local.gid[:keep]
-    sim.body = body[:keep]
-    sim.moves = np.array([b.moves for b in sim.bodies])[sim.body]  # the rows whose reference moves
-    sim.all_move = bool(sim.moves.all())
-    for b in sim.bodies:
-        b.lo, b.hi = (int(k) for k in np.searchsorted(sim.gid[:n], [b.first, b.last]))
-    sim.X, sim.mass, sim.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
-    sim.measure, sim.support = fl["measure"][:keep], fl["support"][:keep]
-    sim.groups = {name: fl["groups"][:n, k].astype(bool) for k, name in enumerate(sim.group_names)}
-    sim.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
-    sim.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
-    # fields registered beyond the base and the updated reference: carried as declared
-    extra = with_trials({name: initial(sim, name, fl, keep) for name in sim.carried
-                               if name not in BASE_FIELDS and name not in UPDATED_STATE}, "particles")
-    sim.F = np.zeros((keep, dim, dim))
-    sim.d, sim.fs = sim.u, sim.F  # total-Lagrangian: the reference is X, F^r = I
-    if sim.updated:
-        eye = np.broadcast_to(np.eye(dim), (keep, dim, dim))
-        sim.Xr = fl["Xr"][:keep] if "Xr" in fl else sim.X.copy()
-        sim.Fr = np.ascontiguousarray(fl["Fr"][:keep] if "Fr" in fl else eye)
-        sim.measure_r = fl["measure_r"][:keep] if "measure_r" in fl else sim.measure.copy()
-        sim.volume_r = fl["volume_r"][:keep] if "volume_r" in fl else sim.volume.copy()
-        sim.shift = reference_shift(sim)
-        sim.d = np.zeros((keep, dim))
-        sim.fs = np.zeros((keep, dim, dim))
-    sim.f = np.zeros((keep, dim, dim) if sim.eta > 0 else (0, dim, dim))
-    sim.B = np.zeros((keep, dim, dim) if sim.eta > 0 else (0, dim, dim))
-    sim.VP = np.zeros((keep, dim, dim))
-    sim.J = np.ones(keep)
-    sim.psi = np.zeros(keep)
-    sim.no_state = np.zeros((keep, 0))  # the hyperelastic laws carry no per-point state
-    sim.broken = np.zeros(n, bool)  # failed particles (materials.damage), set at commits
-    sim.f_int = np.zeros((n, dim))
-    sim.f_hg = np.zeros((n, dim) if sim.hourglass else (0, dim))
-    sim.omega_hg2 = np.zeros(n if sim.hourglass else 0)  # written by the forces stage
-    sim.scratch33 = np.empty((3, 3))  # of the kernels of the stable step and the read-outs
-    variational = any(b.formulation.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for b in sim.bodies)
-    sim.hg_psi = np.zeros(n if variational else 0)
-    sim.viscous = any(any(getattr(b.formulation, "viscosity", ())) for b in sim.bodies)
-    sim.f_visc = np.zeros((n if sim.viscous else 0, dim))
-    sim.viscous_heating = np.zeros(n if sim.viscous else 0)  # the power the viscosity turns to heat [W]
-    # the step allowed by the particles' motion (closing pairs: viscosity, contact; surfaces), set at each evaluation
-    limited = sim.viscous or sim.scene.contact or sim.scene.surfaces
-    sim.step_limit = np.full(n if limited else 0, np.inf)
-    sim.youngs = np.array([b.constants.youngs for b in sim.bodies])[sim.body]
-    arrays = dict(X=sim.X, measure=sim.measure, volume=sim.volume, mass=sim.mass, support=sim.support,
-                  groups=fl["groups"][:keep], u=sim.u, v=sim.v, d=sim.d, F=sim.F, fs=sim.fs, f=sim.f,
-                  B=sim.B, VP=sim.VP, J=sim.J, psi=sim.psi, youngs=sim.youngs, **extra)
-    if sim.updated:
-        arrays.update(Xr=sim.Xr, Fr=sim.Fr, measure_r=sim.measure_r, volume_r=sim.volume_r)
-    sim.particles = PointSet("particles", sim.gid, n, sim.decomp, sim.carried, arrays)
-    sim.failure.find_broken(sim)
-    sim.sets = {name: adopt_set(sim, name, other) for name, other in (local.sets or {}).items()}
-    with collective(sim.comm):  # the formulations' own relations
-        for b in sim.bodies:
-            b.formulation.build(sim, b, b.relation.kernel)
-    with collective(sim.comm):
-        parameters = sim.scene.parameters
-        sim.bcs = BoundaryConditions(sim.scene.bc, sim.groups, sim.X[:n], sim.gid[:n], parameters,
-                                      sim.t)
-        sim.tractions = Tractions(sim.scene.tractions, sim.groups, sim.X[:n], sim.gid[:n],
-                                   sim.measure[:n], config.thickness(sim.scene), parameters)
-    efg = any(collocated(b.formulation) for b in sim.bodies)
-    sim.collocation = BoundaryCollocation(sim) if efg and sim.scene.bc else None
-    sim.walls.select(sim.groups)
-    sim.interaction = interactions.build(sim)  # by kind: parsph.interactions
-    sim.interactions = [i for i in sim.interaction.values() if i is not None]  # summed in this order
-    sim.contact, sim.ties = sim.interaction["contact"], sim.interaction["ties"]
-    sim.omega_c2 = interactions.frequency_bound(sim.interactions, n)
-    sim.exclude_kernel_pairs()
-    for b in sim.bodies:
-        b.stages = [] if b.rigid else b.formulation.stages(sim, b)
-        if b.rigid:
-            sim.F[b.lo:b.hi] = np.eye(dim)
+WORK = (
+    Work("F", "local", "tensor"),  # deformation gradient (from the reference)
+    Work("f", "local", "tensor", "hessian"),  # Hessian-stabilised gradient [V eq. 39]
+    Work("B", "local", "tensor", "hessian"),  # its correction
+    Work("VP", "local", "tensor"),  # volume times first Piola-Kirchhoff stress
+    Work("J", "local", fill=1.0),  # det F
+    Work("psi", "local"),  # strain energy density
+    Work("no_state", "local", "none"),  # the state of a law without one
+    Work("broken", "owned", dtype=bool),  # failed particles (materials.damage), set at commits
+    Work("f_int", "owned", "vector"),  # the bodies' internal forces
+    Work("f_hg", "owned", "vector", "hourglass"),  # hourglass control's forces
+    Work("omega_hg2", "owned", need="hourglass"),  # its springs' squared frequency (stable step)
+    Work("hg_psi", "owned", need="variational"),  # the variational hourglass penalty's energy
+    Work("f_visc", "owned", "vector", "viscous"),  # artificial viscosity's forces
+    Work("viscous_heating", "owned", need="viscous"),  # the power it turns to heat [W]
+    # the step allowed by the particles' motion (closing pairs: viscosity, contact; surfaces)
+    Work("step_limit", "owned", need="limited", fill=np.inf),
+)
 
 
-def adopt_set(sim, name: str, local: LocalBody) -> PointSet:
-    """Another point set (stress points, Gauss points: formulations.galerkin): owned
-    points, then ghosts (within the kernel support of an owned particle), the fields it
-    carries, work arrays and halo plan; each body's rows of it."""
-    dim, fl = sim.dim, local.fields
-    rows = local.n_owned + local.n_ghost
-    carried = fields.carried(sim.owners, name)
-    arrays = with_trials({field: initial(sim, field, fl, rows, name) for field in carried}, name)
-    arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
-                  psi=np.zeros(rows))
-    if sim.updated:  # the motion from the updated reference
-        arrays["fs"] = np.zeros((rows, dim, dim))
-    body = arrays["body"][: local.n_owned]
-    for b in sim.bodies:
-        b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
-    return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, sim.comm), carried, arrays)
+class RankState:
+    """The rank's particles of every body (its `bodies`, state.Body): the carried fields
+    (parsph.fields) and the declared work arrays (WORK) on owned rows first, then ghosts,
+    the other point sets (stress points, Gauss points), the halo plan and the flags the
+    bodies settle for the whole particle set: whether a reference moves (`updated`; in every
+    step: `eulerian`), Hessian stabilisation (`eta` > 0), hourglass control and artificial
+    viscosity (their arrays), and the owners of the registered fields the particles carry.
+    Each body's kernel, eta and schedule are its kernel relation's (parsph.kernel_relation)."""
+
+    def __init__(self, bodies: list, dim: int, comm, group_names: list, limited: bool):
+        self.bodies, self.dim, self.comm, self.group_names = bodies, dim, comm, group_names
+        forms = [b.formulation for b in bodies]
+        moving = [b.formulation for b in bodies if b.moves]  # their reference moves
+        self.updated = bool(moving)
+        self.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
+        self.eta = max(f.eta for f in forms)
+        self.hourglass = any(f.hourglass_form for f in forms)
+        self.viscous = any(any(getattr(f, "viscosity", ())) for f in forms)
+        self.needs = {"hessian": self.eta > 0, "hourglass": self.hourglass, "viscous": self.viscous,
+                      "variational": any(f.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for f in forms),
+                      "limited": self.viscous or limited}
+        # the formulations, laws and their states, the updated reference and damage the bodies use
+        self.owners = {f.type for f in forms} | {b.law.name for b in bodies} | {b.law.state for b in bodies}
+        if self.updated:
+            self.owners.add("updated")
+        if any(b.failure for b in bodies):
+            self.owners.add("damage")
+        if self.viscous:
+            self.owners.add("viscosity")
+        self.carried = fields.carried(self.owners)  # the registered fields the particles carry
+
+    def adopt(self, local: LocalBody, decomp: Decomposition, body: np.ndarray, keep: int) -> None:
+        """Take the first `keep` rows of `local` (owned particles, then ghosts; `body`: each
+        row's body) with the halo plan `decomp` as this rank's particles: the carried fields
+        as `local` has them (or their initial values), the work arrays, the other point sets."""
+        fl, n, dim = local.fields, local.n_owned, self.dim
+        self.n_owned, self.decomp = n, decomp
+        self.gid = local.gid[:keep]
+        self.body = body[:keep]
+        self.moves = np.array([b.moves for b in self.bodies])[self.body]  # the rows whose reference moves
+        for b in self.bodies:
+            b.lo, b.hi = (int(k) for k in np.searchsorted(self.gid[:n], [b.first, b.last]))
+        self.X, self.mass, self.volume = fl["X"][:keep], fl["mass"][:keep], fl["volume"][:keep]
+        self.measure, self.support = fl["measure"][:keep], fl["support"][:keep]
+        self.groups = {name: fl["groups"][:n, k].astype(bool) for k, name in enumerate(self.group_names)}
+        self.u = fl["u"][:keep].copy() if "u" in fl else np.zeros((keep, dim))
+        self.v = fl["v"][:keep].copy() if "v" in fl else np.zeros((keep, dim))
+        # fields registered beyond the base and the updated reference: carried as declared
+        extra = with_trials({name: initial(name, fl, keep, dim) for name in self.carried
+                             if name not in BASE_FIELDS and name not in UPDATED_STATE}, "particles")
+        shapes = {"scalar": (), "vector": (dim,), "tensor": (dim, dim), "none": (0,)}
+        for w in WORK:
+            rows = (keep if w.rows == "local" else n) if w.need is None or self.needs[w.need] else 0
+            setattr(self, w.name, np.full((rows,) + shapes[w.shape], w.fill, w.dtype))
+        self.d, self.fs = self.u, self.F  # total-Lagrangian: the reference is X, F^r = I
+        if self.updated:
+            eye = np.broadcast_to(np.eye(dim), (keep, dim, dim))
+            self.Xr = fl["Xr"][:keep] if "Xr" in fl else self.X.copy()
+            self.Fr = np.ascontiguousarray(fl["Fr"][:keep] if "Fr" in fl else eye)
+            self.measure_r = fl["measure_r"][:keep] if "measure_r" in fl else self.measure.copy()
+            self.volume_r = fl["volume_r"][:keep] if "volume_r" in fl else self.volume.copy()
+            self.shift = self.reference_shift()
+            self.d = np.zeros((keep, dim))
+            self.fs = np.zeros((keep, dim, dim))
+        self.scratch33 = np.empty((3, 3))  # of the kernels of the stable step and the read-outs
+        self.youngs = np.array([b.constants.youngs for b in self.bodies])[self.body]
+        arrays = dict(X=self.X, measure=self.measure, volume=self.volume, mass=self.mass, support=self.support,
+                      groups=fl["groups"][:keep], u=self.u, v=self.v, d=self.d, F=self.F, fs=self.fs, f=self.f,
+                      B=self.B, VP=self.VP, J=self.J, psi=self.psi, youngs=self.youngs, **extra)
+        if self.updated:
+            arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
+        self.particles = PointSet("particles", self.gid, n, decomp, self.carried, arrays)
+        self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
+
+    def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
+        """Another point set (stress points, Gauss points: formulations.galerkin): owned
+        points, then ghosts (within the kernel support of an owned particle), the fields it
+        carries, work arrays and halo plan; each body's rows of it."""
+        dim, fl = self.dim, local.fields
+        rows = local.n_owned + local.n_ghost
+        carried = fields.carried(self.owners, name)
+        arrays = with_trials({field: initial(field, fl, rows, dim, name) for field in carried}, name)
+        arrays.update(F=np.zeros((rows, dim, dim)), VP=np.zeros((rows, dim, dim)), J=np.ones(rows),
+                      psi=np.zeros(rows))
+        if self.updated:  # the motion from the updated reference
+            arrays["fs"] = np.zeros((rows, dim, dim))
+        body = arrays["body"][: local.n_owned]
+        for b in self.bodies:
+            b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
+        return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, self.comm), carried, arrays)
+
+    def reference_shift(self) -> np.ndarray:
+        """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
+        X^r = X + u (as it is after every move of its reference), so that d is exactly zero
+        in the new reference, whether the lists were searched or kept: its forces use the
+        stress of the last reference (formulations.tlsph.stress_at)."""
+        if self.eulerian:
+            return np.where((self.X + self.u == self.Xr) & self.moves[:, None], self.u, self.Xr - self.X)
+        return self.Xr - self.X
+
+    def point_set(self, name: str) -> PointSet:
+        return self.particles if name == "particles" else self.sets[name]
+
+    def point_sets(self) -> list:
+        """The rank's point sets: the particles, then the others (stress points, Gauss points)."""
+        return [self.particles] + list(self.sets.values())
+
+    def material_state(self, body: Body, points: str = "particles") -> tuple:
+        """(committed, trial) state arrays of `body`'s material law on a point set (empty
+        arrays for a law without state)."""
+        if body.law.state is None:
+            return self.no_state, self.no_state
+        A = self.point_set(points).arrays
+        return A[body.law.state], A[body.law.state + "_trial"]
+
+    def damage_state(self, body: Body) -> tuple:
+        """(committed, trial) damage state arrays of `body`'s particles (empty without damage)."""
+        if not body.failure:
+            return self.no_state, self.no_state
+        return self.particles.arrays["damage"], self.particles.arrays["damage_trial"]
+
+    def refresh(self, names) -> None:
+        """Refresh the ghost values of the named arrays: "NAME" of the particles, "SET.NAME"
+        of another point set."""
+        by_set = collections.defaultdict(list)
+        for name in names:
+            where, _, field = name.rpartition(".")
+            by_set[where or "particles"].append(field)
+        for points in self.point_sets():
+            if by_set.get(points.name):
+                points.refresh(*by_set[points.name])
 
 
 def with_trials(arrays: dict, points: str) -> dict:
@@ -205,7 +224,7 @@ def with_trials(arrays: dict, points: str) -> dict:
     return dict(arrays, **{name + "_trial": arrays[name].copy() for name in states})
 
 
-def initial(sim, name: str, fl: dict, keep: int, points: str = "particles") -> np.ndarray:
+def initial(name: str, fl: dict, keep: int, dim: int, points: str = "particles") -> np.ndarray:
     """A registered field's values on the local rows of a point set: as carried in `fl`
     (migrated, read from a checkpoint), else its declared initial values, else zeros. A
     state carried with fewer columns than declared (a checkpoint from before the state grew
@@ -219,29 +238,7 @@ def initial(sim, name: str, fl: dict, keep: int, points: str = "particles") -> n
     if field.initial is not None:
         values = np.asarray(field.initial(fl["X"][:keep], fl["gid"][:keep]), np.float64).copy()
     else:
-        values = np.zeros((keep,) + field.shape(sim.dim))
+        values = np.zeros((keep,) + field.shape(dim))
     if out is not None:
         values[:, :out.shape[1]] = out
     return values
-
-
-def reference_shift(sim) -> np.ndarray:
-    """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
-    X^r = X + u (as it is after every move of its reference), so that d is exactly zero
-    in the new reference, whether the lists were searched or kept: its forces use the
-    stress of the last reference (formulations.tlsph.stress_at)."""
-    if sim.eulerian:
-        return np.where((sim.X + sim.u == sim.Xr) & sim.moves[:, None], sim.u, sim.Xr - sim.X)
-    return sim.Xr - sim.X
-
-
-def refresh(sim, names) -> None:
-    """Refresh the ghost values of the named arrays: "NAME" of the particles, "SET.NAME"
-    of another point set."""
-    by_set = collections.defaultdict(list)
-    for name in names:
-        where, _, field = name.rpartition(".")
-        by_set[where or "particles"].append(field)
-    for points in sim.point_sets():
-        if by_set.get(points.name):
-            points.refresh(*by_set[points.name])

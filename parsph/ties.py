@@ -71,9 +71,9 @@ TIE_KEYS = {
     "damping": Key("float", 0.0, in_range(0.0, 1.0), "damping ratio of a dashpot across each tie (0: none)"),
 }
 
-TERMS = (Term("tie", "tie_energy", present=lambda sim: sim.ties is not None),
-         Term("tie_released", "tie_released", present=lambda sim: sim.ties is not None),
-         Term("tie_work", "tie_work", present=lambda sim: sim.ties is not None and sim.ties.dissipative))
+TERMS = (Term("tie", "tie_energy", present=lambda sim: sim.interactions.ties is not None),
+         Term("tie_released", "tie_released", present=lambda sim: sim.interactions.ties is not None),
+         Term("tie_work", "tie_work", present=lambda sim: sim.interactions.ties is not None and sim.interactions.ties.dissipative))
 RUNNING = ("tie_released",  # the tie energy broken ties released
            "tie_work")  # absorbed by the ties' dashpots
 
@@ -110,24 +110,25 @@ class Ties:
     name = "ties"  # parsph.interactions
     work = "tie_work"
 
-    def __init__(self, specs: list, sim):
-        """specs: the scene's [[ties]] tables; sim: the state (adopted: bodies, local rows of
-        X, u, v, gid, body, measure, mass, the halo) whose particles are tied (collective)."""
-        n, dim, comm = sim.n_owned, sim.dim, sim.comm
-        index = {b.name: b.index for b in sim.bodies}
+    def __init__(self, specs: list, state, ledger, thickness: float):
+        """specs: the scene's [[ties]] tables; state (state.RankState, adopted: bodies, local
+        rows of X, u, v, gid, body, measure, mass, the halo) whose particles are tied; the
+        ledger books the work of the ties' damping (collective)."""
+        n, dim, comm = state.n_owned, state.dim, state.comm
+        index = {b.name: b.index for b in state.bodies}
         self.entries = [(index[s.bodies[0]], index[s.bodies[1]]) for s in specs]
         self.labels = [f"{s['bodies'][0]}.{s['bodies'][1]}" for s in specs]
-        self.n, self.dim, self.comm, self.ledger = n, dim, comm, sim.ledger
-        self.u, self.v = sim.u, sim.v  # the local rows, the ghosts refreshed by the halo
+        self.n, self.dim, self.comm, self.ledger = n, dim, comm, ledger
+        self.u, self.v = state.u, state.v  # the local rows, the ghosts refreshed by the halo
         self.zeta = np.array([s.damping for s in specs])
         self.dissipative = bool((self.zeta > 0).any())
         self.reads = ("d", "v") if self.dissipative else ("d",)  # total-Lagrangian: d is u
-        rows = len(sim.X)
-        real = sim.gid < sim.decomp.total  # no mirror images
-        spacing = sim.measure ** (1.0 / dim)
-        largest = np.array([float(spacing[:n][sim.body[:n] == b.index].max(initial=0.0)) for b in sim.bodies])
+        rows = len(state.X)
+        real = state.gid < state.decomp.total  # no mirror images
+        spacing = state.measure ** (1.0 / dim)
+        largest = np.array([float(spacing[:n][state.body[:n] == b.index].max(initial=0.0)) for b in state.bodies])
         comm.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
-        reach = comm.allreduce(float(sim.support[:n].max()) if n else 0.0, op=MPI.MAX)  # add_ghosts'
+        reach = comm.allreduce(float(state.support[:n].max()) if n else 0.0, op=MPI.MAX)  # add_ghosts'
         self.distance = []
         for k, (s, (a, b)) in enumerate(zip(specs, self.entries)):
             d = s.distance or min(SPACINGS * max(largest[a], largest[b]), reach)
@@ -138,49 +139,47 @@ class Ties:
                 raise error
             self.distance.append(d)
         # the pairs: owned particles of a tied body (rows) and the other body's local rows within distance
-        entry_of = np.full((len(sim.bodies),) * 2, -1, np.int64)
+        entry_of = np.full((len(state.bodies),) * 2, -1, np.int64)
         for k, (a, b) in enumerate(self.entries):
             entry_of[a, b] = entry_of[b, a] = k
-        points = np.flatnonzero(real & (entry_of[sim.body].max(axis=1) >= 0))
-        i, j = close_pairs(sim.X[points], max(self.distance, default=0.0), sim.body[points], entry_of >= 0) \
+        points = np.flatnonzero(real & (entry_of[state.body].max(axis=1) >= 0))
+        i, j = close_pairs(state.X[points], max(self.distance, default=0.0), state.body[points], entry_of >= 0) \
             if len(points) else (np.zeros(0, np.int64), np.zeros(0, np.int64))
         i, j = points[i], points[j]
-        entry = entry_of[sim.body[i], sim.body[j]]
-        sep = sim.X[j] - sim.X[i]
+        entry = entry_of[state.body[i], state.body[j]]
+        sep = state.X[j] - state.X[i]
         keep = (entry >= 0) & (np.sqrt(np.einsum("pa,pa->p", sep, sep)) < np.array(self.distance + [0.0])[entry])
         i, j = np.concatenate([i[keep], j[keep]]), np.concatenate([j[keep], i[keep]])
-        order = np.lexsort((sim.gid[j], i))
+        order = np.lexsort((state.gid[j], i))
         i, j = i[order], j[order]
         # each particle's partner count and direction sum, the owned rows' sent to the ghosts
         count = np.bincount(i, minlength=rows).astype(np.float64)
-        sep = sim.X[j] - sim.X[i]
+        sep = state.X[j] - state.X[i]
         toward = np.zeros((rows, dim))
         np.add.at(toward, i, sep / np.sqrt(np.einsum("pa,pa->p", sep, sep))[:, None])
-        sim.decomp.refresh(count, toward)
+        state.decomp.refresh(count, toward)
         owned = i < n
         i, j = i[owned], j[owned]
         self.ptr = np.zeros(n + 1, np.int64)
         np.cumsum(np.bincount(i, minlength=n), out=self.ptr[1:])
         self.idx = j
-        self.first = sim.gid[i] < sim.gid[j]  # i is the pair's p (its lower global id)
+        self.first = state.gid[i] < state.gid[j]  # i is the pair's p (its lower global id)
         p, q = np.where(self.first, i, j), np.where(self.first, j, i)
-        self.keys = pair_keys(sim.gid[i], sim.gid[j])
-        self.entry = entry_of[sim.body[i], sim.body[j]]
+        self.keys = pair_keys(state.gid[i], state.gid[j])
+        self.entry = entry_of[state.body[i], state.body[j]]
         normal = toward[p] - toward[q]
         size = np.sqrt(np.einsum("pa,pa->p", normal, normal))
-        gap_vec = sim.X[q] - sim.X[p]
+        gap_vec = state.X[q] - state.X[p]
         along = np.sqrt(np.einsum("pa,pa->p", gap_vec, gap_vec))
         flat = size > 1e-6  # else (the directions cancel) the pair's own
         self.normal = np.where(flat[:, None], normal / np.where(flat, size, 1.0)[:, None],
                                gap_vec / along[:, None])
         gap = np.maximum(np.abs(np.einsum("pa,pa->p", gap_vec, self.normal)), 0.5 * along)  # never along the face
-        from parsph import config  # config imports the keys above
-        scale = config.thickness(sim.scene)
-        face = sim.measure ** ((dim - 1.0) / dim) * scale
+        face = state.measure ** ((dim - 1.0) / dim) * thickness
         self.area = 0.5 * (face[p] / count[p] + face[q] / count[q])
-        c = [b.constants for b in sim.bodies]
-        M = np.array([x.lam + 2.0 * x.mu for x in c])[sim.body]
-        G = np.array([x.mu for x in c])[sim.body]
+        c = [b.constants for b in state.bodies]
+        M = np.array([x.lam + 2.0 * x.mu for x in c])[state.body]
+        G = np.array([x.mu for x in c])[state.body]
         factor = np.array([s.stiffness for s in specs])[self.entry] if len(specs) else np.zeros(0)
         self.k_n = factor * 2.0 / (gap * (1.0 / M[p] + 1.0 / M[q]))
         self.k_t = np.where((G[p] > 0) & (G[q] > 0), factor * 2.0 / (gap * (1.0 / np.where(G[p] > 0, G[p], 1.0)
@@ -188,10 +187,10 @@ class Ties:
                             0.0)
         strength = np.array([[s.normal_strength, s.shear_strength] for s in specs]).reshape(-1, 2)
         self.strength = strength[self.entry]
-        self.reduced = sim.mass[p] * sim.mass[q] / (sim.mass[p] + sim.mass[q])
+        self.reduced = state.mass[p] * state.mass[q] / (state.mass[p] + state.mass[q])
         self.broken = np.zeros(len(j), np.bool_)
         self.jump = np.zeros((len(j), dim))  # w at the last evaluation
-        self.mass = sim.mass[:n]
+        self.mass = state.mass[:n]
         self.force = np.zeros((n, dim))
         self.dissipation = np.zeros((n if self.dissipative else 0, dim))
         self.energy = np.zeros(n)
@@ -224,13 +223,13 @@ class Ties:
         self.broken |= np.isin(self.keys, np.asarray(carried.get("ties_broken", []), np.int64))
 
 
-def columns(sim, reduction):
+def columns(ties, state, reduction):
     """The ties' history series: each entry's force on its first body from its second,
     "tie_force_X.FIRST.SECOND" [N], and its broken ties, "ties_broken.FIRST.SECOND" (each
     counted on both sides, halved). Returns the function that gives them once `reduction`
     (diagnostics.RowReduction) is reduced."""
-    ties, dim = sim.ties, sim.dim
-    at = reduction.add_sums([ties.entry_force[k, sim.bodies[first].lo:sim.bodies[first].hi]
+    dim = state.dim
+    at = reduction.add_sums([ties.entry_force[k, state.bodies[first].lo:state.bodies[first].hi]
                              for k, (first, _) in enumerate(ties.entries)])
     broken = np.bincount(ties.entry[ties.broken], minlength=len(ties.entries)).astype(np.float64)
     counts = reduction.add_sums([broken[None, :]])
@@ -246,9 +245,12 @@ def columns(sim, reduction):
     return values
 
 
-def build(sim) -> Ties | None:
+def build(scene: dict, state, ledger, topology) -> Ties | None:
     """The ties of the scene's [[ties]], or None."""
-    return Ties(sim.scene.ties, sim) if sim.scene.ties else None
+    if not scene.ties:
+        return None
+    from parsph import config  # config imports the ties' keys
+    return Ties(scene.ties, state, ledger, config.thickness(scene))
 
 
 @njit(cache=True, _nrt=False)

@@ -14,15 +14,13 @@ relations' reference data on their kept lists: the same result as a search at ev
 from __future__ import annotations
 
 import contextlib
-import time
 
 import numpy as np
 
-from parsph import fields, state
-from parsph.collocation import BoundaryCollocation
+from parsph import fields
 from parsph.errors import InputError, ParsphError
 from parsph.kernel_relation import Configuration, KernelRelation, groups, reach
-from parsph.parallel.decomposition import add_ghosts, localize, partition
+from parsph.parallel.decomposition import LocalBody, add_ghosts, localize, partition
 from parsph.parallel.runtime import collective
 from parsph.relations import Relation
 
@@ -35,6 +33,8 @@ class Topology:
         length = reach(local.fields["support"][: local.n_owned], comm)
         self.relations = [KernelRelation(k, group, bodies, scene, length, comm)
                           for k, group in enumerate(groups(bodies, scene))]
+        self.rebalance = scene.parallel.rebalance  # the work imbalance that repartitions
+        self.builds = 0  # the builds of the relations' reference data so far (a self-contact's cue)
 
     @property
     def count(self) -> int:
@@ -89,6 +89,7 @@ class Topology:
     def build(self, at: Configuration, **how) -> np.ndarray:
         """Every relation's reference data in configuration `at` (KernelRelation.build);
         returns the singular rows (with `tolerant`)."""
+        self.builds += 1
         return np.concatenate([r.build(at, **how).bad for r in self.relations])
 
     def kernel_pairs(self) -> Relation:
@@ -105,66 +106,65 @@ class Topology:
     def pair_count(self) -> int:
         return sum(len(r.ref.idx) for r in self.relations)
 
-    def move(self, sim, due: list | None = None) -> bool:
+    def move(self, state, ledger, due: list) -> LocalBody | None:
         """Make the current configuration the reference [V §3.1] of the `due` relations'
-        bodies (None: the Eulerian ones): X^r = x, F^r = F, V^r = J V^0 (Remark 1);
-        re-decide ownership (parallel RCB of X^r) if the work is out of balance, migrate the
-        particles with their state, find ghosts and neighbours in X^r and rebuild the
-        corrections. A relation that keeps its lists searches at most every search_every of
-        its updates, with lists and ghost layers a skin wider, and in between rebuilds its
-        reference on the kept lists (_recommit): the same result as a search every time.
-        Returns whether it searched (the arrays are new)."""
-        start = time.perf_counter()
-        due = [r for r in self.relations if r.eulerian] if due is None else due
+        bodies: X^r = x, F^r = F, V^r = J V^0 (Remark 1); re-decide ownership (parallel RCB
+        of X^r) if the work is out of balance, migrate the particles with their state and find
+        ghosts in X^r: returns them (a LocalBody) for the simulation to adopt. A relation
+        that keeps its lists searches at most every search_every of its updates, with lists
+        and ghost layers a skin wider, and in between rebuilds its reference on the kept
+        lists (_recommit, returns None): the same result as a search every time. `moved`
+        ends the update."""
         bodies = [b for r in due for b in r.bodies if b.moves]
         for b in bodies:  # the penalty restarts at 0
-            sim.ledger.totals["hourglass_released"][b.index].add(sim.hg_psi[b.lo:b.hi])
+            ledger.totals["hourglass_released"][b.index].add(state.hg_psi[b.lo:b.hi])
         # the rows whose reference moves now: those of every moving body (the mask adopt made), or fewer
-        moving = sim.moves if len(bodies) == sum(b.moves for b in sim.bodies) else \
-            np.isin(sim.body, [b.index for b in bodies])
-        n = sim.n_owned
-        moved = {name: self._moved(sim, name, bodies) for name in sim.sets}  # stress points at the current configuration
-        x = sim.X[:n] + sim.u[:n] if moving.all() else \
-            np.where(moving[:n, None], sim.X[:n] + sim.u[:n], sim.Xr[:n])  # the new reference
+        moving = state.moves if len(bodies) == sum(b.moves for b in state.bodies) else \
+            np.isin(state.body, [b.index for b in bodies])
+        n = state.n_owned
+        moved = {name: self._moved(state, name, bodies) for name in state.sets}  # stress points at x
+        x = state.X[:n] + state.u[:n] if moving.all() else \
+            np.where(moving[:n, None], state.X[:n] + state.u[:n], state.Xr[:n])  # the new reference
         points = np.concatenate([x, *moved.values()])
-        searching = any(r.rule.every == 1 or r.rule.due(points, r.rows(sim)) for r in due)
-        if searching:
-            self._search(sim, moved, moving)
-        else:
-            self._recommit(sim, moved, moving, due)
+        if any(r.rule.every == 1 or r.rule.due(points, r.rows(state)) for r in due):
+            return self._search(state, ledger, moved, moving)
+        self._recommit(state, moved, moving, due)
+        return None
+
+    def moved(self, state, due: list, searched: bool) -> None:
+        """The end of a reference update of the `due` relations (after the simulation adopted
+        the particles of a search)."""
+        if searched:
+            points = np.concatenate([state.Xr[: state.n_owned], *(p.owned("Xr") for p in state.sets.values())])
+            for r in self.relations:
+                r.rule.searched(points, r.rows(state))
         for r in due:
             r.rule.stepped()
             r.count += 1
             r.since = 0
-        sim.stage_seconds["reference update"] += time.perf_counter() - start
-        return searching
 
-    def _search(self, sim, moved: dict, moving: np.ndarray) -> None:
-        """The reference update with a new decomposition: ownership, ghosts, every relation
+    def _search(self, state, ledger, moved: dict, moving: np.ndarray) -> LocalBody:
+        """The reference update with a new decomposition: ownership and ghosts in X^r
         (`moved`: the owned points of the other sets at their new reference, _moved; `moving`:
-        the rows whose reference moves)."""
-        n = sim.n_owned
-        owned = dict(sim.particles.migrating(), **self._new_reference(sim, moving), **sim.ledger.in_flight(sim))
+        the rows whose reference moves); every relation searches when they are adopted."""
+        comm, n = state.comm, state.n_owned
+        owned = dict(state.particles.migrating(), **self._new_reference(state, moving), **ledger.in_flight(state))
         # stress points of an Eulerian kernel: moved with the particles, repartitioned with them
         sets = {name: dict(points.migrating(), Xr=moved[name], Fr=points.owned("F").copy())
-                for name, points in sim.sets.items()}
-        if sim.comm.size > 1 and not sets:
-            work = np.array(sim.comm.allgather(self.pair_count() + n), float)
-            if work.max() > (1.0 + sim.rebalance) * work.mean():
-                owned = partition(owned, "Xr", sim.comm)
+                for name, points in state.sets.items()}
+        if comm.size > 1 and not sets:
+            work = np.array(comm.allgather(self.pair_count() + n), float)
+            if work.max() > (1.0 + self.rebalance) * work.mean():
+                owned = partition(owned, "Xr", comm)
         for r in self.relations:  # the new numbering of the rows: every relation searches
             r.skin = r.rule.length if r.rule.every > 1 else 0.0
-        with collective(sim.comm):
-            local = localize(owned, sets, "Xr", sim.comm, self.skin) if sets else \
-                add_ghosts(owned, "Xr", sim.comm, skin=self.skin)
-        sim.ledger.land(local.fields, local.n_owned)  # the step's start, with its particles
-        with self._failure(sim):
-            state.adopt(sim, local)
-        points = np.concatenate([sim.Xr[: sim.n_owned], *(points.owned("Xr") for points in sim.sets.values())])
-        for r in self.relations:
-            r.rule.searched(points, r.rows(sim))
+        with collective(comm):
+            local = localize(owned, sets, "Xr", comm, self.skin) if sets else \
+                add_ghosts(owned, "Xr", comm, skin=self.skin)
+        ledger.land(local.fields, local.n_owned)  # the step's start, with its particles
+        return local
 
-    def _recommit(self, sim, moved: dict, moving: np.ndarray, due: list) -> None:
+    def _recommit(self, state, moved: dict, moving: np.ndarray, due: list) -> None:
         """The reference update between searches: X^r = x, F^r = F, V^r = J V^0 on the owned
         particles whose reference moves (`moving`, and their moved stress points), every
         carried field refreshed on both ghost layers, then the `due` relations' reference
@@ -172,76 +172,74 @@ class Topology:
         same as _search gives, without repartitioning or finding neighbours. F, the stress
         and VP (formed for the current configuration) stand; the motion from the new
         reference is the identity."""
-        n = sim.n_owned
-        eye = np.eye(sim.dim)
+        n = state.n_owned
+        eye = np.eye(state.dim)
         everything = bool(moving.all())
-        for name, points in sim.sets.items():
+        for name, points in state.sets.items():
             A = points.arrays
             A["Xr"][: points.n_owned] = moved[name]
             A["Fr"][: points.n_owned] = A["F"][: points.n_owned]
             A["fs"][:] = eye
             points.refresh("Xr", "Fr")
-        for name, value in self._new_reference(sim, moving).items():
-            getattr(sim, name)[:n] = value
-        sim.particles.refresh_all(*(name for name in fields.migrating(sim.carried) if name != "gid"))
-        if sim.eulerian and everything:
-            sim.shift[:] = sim.u  # d = 0 exactly (state.reference_shift)
+        for name, value in self._new_reference(state, moving).items():
+            getattr(state, name)[:n] = value
+        state.particles.refresh_all(*(name for name in fields.migrating(state.carried) if name != "gid"))
+        if state.eulerian and everything:
+            state.shift[:] = state.u  # d = 0 exactly (state.RankState.reference_shift)
         else:
-            np.subtract(sim.Xr, sim.X, out=sim.shift)
-            if sim.eulerian:
-                np.copyto(sim.shift, sim.u, where=moving[:, None])
+            np.subtract(state.Xr, state.X, out=state.shift)
+            if state.eulerian:
+                np.copyto(state.shift, state.u, where=moving[:, None])
         if everything:
-            sim.d[:] = 0.0
+            state.d[:] = 0.0
         else:  # the bodies that keep their reference: d = u - (X^r - X)
-            np.subtract(sim.u, sim.shift, out=sim.d)
-            sim.d[moving] = 0.0
-        sim.fs[:] = eye
-        sim.hg_psi[moving[: len(sim.hg_psi)]] = 0.0
-        at = Configuration(sim.Xr, sim.measure_r, sim.volume_r, sim.support, sim.gid, sim.body, n, sim.decomp.n_rows)
-        with self._failure(sim), collective(sim.comm):
+            np.subtract(state.u, state.shift, out=state.d)
+            state.d[moving] = 0.0
+        state.fs[:] = eye
+        state.hg_psi[moving[: len(state.hg_psi)]] = 0.0
+        at = Configuration(state.Xr, state.measure_r, state.volume_r, state.support, state.gid, state.body, n,
+                           state.decomp.n_rows)
+        with collective(state.comm):
             for r in due:
                 r.build(at, search=False)
-            sim.exclude_kernel_pairs()
+            self.builds += 1
             for r in due:
                 for b in r.bodies:
-                    b.formulation.build(sim, b, r.kernel, search=False)
-        if sim.collocation:
-            sim.collocation = BoundaryCollocation(sim)
-        for b in sim.bodies:
-            b.stages = b.formulation.stages(sim, b)
+                    b.formulation.build(state, b, r.kernel, self.skin, search=False)
 
     @staticmethod
-    def _new_reference(sim, moving: np.ndarray) -> dict:
+    def _new_reference(state, moving: np.ndarray) -> dict:
         """The owned particles' new updated reference: X^r = x, F^r = F, V^r = J V^0 (Remark 1)
         where it moves (`moving`); the other rows keep theirs."""
-        n = sim.n_owned
-        new = dict(Xr=sim.X[:n] + sim.u[:n], Fr=sim.F[:n].copy(), measure_r=sim.J[:n] * sim.measure[:n],
-                   volume_r=sim.J[:n] * sim.volume[:n])
+        n = state.n_owned
+        new = dict(Xr=state.X[:n] + state.u[:n], Fr=state.F[:n].copy(), measure_r=state.J[:n] * state.measure[:n],
+                   volume_r=state.J[:n] * state.volume[:n])
         if not moving.all():
             still = ~moving[:n]
             for name, value in new.items():
-                value[still] = getattr(sim, name)[:n][still]
+                value[still] = getattr(state, name)[:n][still]
         return new
 
     @staticmethod
-    def _moved(sim, name: str, bodies: list) -> np.ndarray:
+    def _moved(state, name: str, bodies: list) -> np.ndarray:
         """The owned points of set `name` at their new updated reference, those of `bodies`
         moved with their particles (formulations.galerkin.GalerkinFormulation.moved)."""
-        Xr = sim.sets[name].owned("Xr").copy()
+        Xr = state.sets[name].owned("Xr").copy()
         for b in bodies:
             lo, hi = b.set_rows[name]
             if hi > lo:
-                Xr[lo:hi] = b.formulation.moved(sim, b)
+                Xr[lo:hi] = b.formulation.moved(state, b)
         return Xr
 
     @contextlib.contextmanager
-    def _failure(self, sim):
-        """A reference update that fails on the configuration (not the input) says so."""
+    def failing(self, step: int, t: float):
+        """A reference update (at `step`, time t) that fails on the configuration (not the
+        input) says so."""
         try:
             yield
         except InputError as exc:
             error = ParsphError(
-                f"reference update {self.count + 1} at step {sim.step_count}, t = {sim.t:.6g} failed: "
+                f"reference update {self.count + 1} at step {step}, t = {t:.6g} failed: "
                 f"{str(exc).rstrip('.')}. The particles are too disordered for a new reference: update "
                 "earlier (formulation.update_strain), raise the stabilisation or refine the particles")
             error.agreed = getattr(exc, "agreed", False)

@@ -43,13 +43,13 @@ def run_until(sim: Simulation, end: float, every: int = 1, probe=None) -> dict:
 
 def energy_gradient(sim: Simulation, energy, i: int, eps: float) -> np.ndarray:
     """Central differences of energy() with respect to particle i's displacement."""
-    out = np.zeros(sim.dim)
-    for a in range(sim.dim):
-        sim.u[i, a] += eps
+    out = np.zeros(sim.state.dim)
+    for a in range(sim.state.dim):
+        sim.state.u[i, a] += eps
         up = energy()
-        sim.u[i, a] -= 2 * eps
+        sim.state.u[i, a] -= 2 * eps
         down = energy()
-        sim.u[i, a] += eps
+        sim.state.u[i, a] += eps
         out[a] = (up - down) / (2 * eps)
     return out
 
@@ -117,7 +117,7 @@ def poison_undeclared(sim) -> None:
     a stage that reads one at neighbours without declaring it computes other forces. (NaN
     would hide in the kernels' comparisons, which are false for it.)"""
     changing = []
-    for points in sim.point_sets():
+    for points in sim.state.point_sets():
         n = points.n_owned
         prefix = "" if points.name == "particles" else points.name + "."
         changing += [(prefix + k, a, n) for k, a in points.arrays.items() if k not in CONSTANT
@@ -139,5 +139,5 @@ def poison_undeclared(sim) -> None:
                     a[n:] = value
         return dataclasses.replace(stage, run=run)
 
-    for b in sim.bodies:
+    for b in sim.state.bodies:
         b.stages = [wrap(stage) for stage in b.stages]

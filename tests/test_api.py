@@ -70,8 +70,8 @@ def test_an_unknown_quantity_is_refused_with_the_known_names():
 
 def test_build_validates_the_scene_it_is_given():
     scene = load_scene(RUNS / "bars_impact.toml")
-    assert build(scene).contact is not None  # a resolved scene passes unchanged, as does its table
-    assert build(scene.as_dict()).contact is not None
+    assert build(scene).interactions.contact is not None  # a resolved scene passes unchanged, as does its table
+    assert build(scene.as_dict()).interactions.contact is not None
     contact = scene.as_dict()
     contact["contact"][0]["radius"] = math.nan
     with pytest.raises(InputError, match=r"contact\[0\].radius must be finite, got nan"):

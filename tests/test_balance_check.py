@@ -218,7 +218,7 @@ def flyer(*overrides) -> tuple:
     t, front = np.array(rows).T
     X = sim.quantity("reference_position")[:, 0]
     behind = (X > 0.3 * front[-1]) & (X < front[-1] - 5e-4)
-    state = sim.material_state(sim.bodies[0])[1][: sim.n_owned]
+    state = sim.state.material_state(sim.state.bodies[0])[1][: sim.state.n_owned]
     from parsph.materials import mie_gruneisen as mg
     internal = state[:, mg.ENERGY] + state[:, mg.HEAT]  # the pressure's work and the shock's heat
     stress = -sim.quantity("cauchy_stress")[:, 0, 0]

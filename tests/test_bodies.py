@@ -95,19 +95,19 @@ def test_bodies_within_a_kernel_support_are_not_neighbours():
     raw["bodies"][1]["parts"][0]["lower"][0] = 0.1  # touching: one spacing between the lattices
     raw["bodies"][1]["parts"][0]["upper"][0] = 0.2
     sim = _sim(raw)
-    rows = np.repeat(np.arange(sim.n_owned), np.diff(sim.topology.relations[0].ref.ptr))
-    assert len(rows) and np.array_equal(sim.body[rows], sim.body[sim.topology.relations[0].ref.idx])
-    near = np.abs(sim.X[:, 0] - 0.1) < 0.01  # both bodies' particles next to the joint
-    assert set(sim.body[near]) == {0, 1}
+    rows = np.repeat(np.arange(sim.state.n_owned), np.diff(sim.topology.relations[0].ref.ptr))
+    assert len(rows) and np.array_equal(sim.state.body[rows], sim.state.body[sim.topology.relations[0].ref.idx])
+    near = np.abs(sim.state.X[:, 0] - 0.1) < 0.01  # both bodies' particles next to the joint
+    assert set(sim.state.body[near]) == {0, 1}
 
 
 def test_each_body_has_its_material_and_formulation():
     sim = _sim(_raw())
-    steel, rubber = sim.bodies
+    steel, rubber = sim.state.bodies
     assert (steel.law.name, rubber.law.name) == ("saint_venant_kirchhoff", "neo_hookean")
     assert (steel.formulation.type, rubber.formulation.type) == ("tlsph", "sph")
     assert steel.formulation.alpha == 50.0 and rubber.formulation.alpha == 0.0
-    assert np.all(sim.youngs[sim.body == 0] == 200e9) and np.all(sim.youngs[sim.body == 1] == 0.3e9)
+    assert np.all(sim.state.youngs[sim.state.body == 0] == 200e9) and np.all(sim.state.youngs[sim.state.body == 1] == 0.3e9)
     assert sim.quantity("mass")[sim.quantity("body") == 1].max() == pytest.approx(1100.0 * 0.005 ** 2)
 
 

@@ -250,7 +250,7 @@ def test_a_block_sliding_on_a_fine_rigid_floor_decelerates_at_mu_g(rigid, floor_
     floor of its density, -23 % for the elastic block on a floor a tenth as dense, where
     a held floor's density should not matter at all.)"""
     sim = simulation(sliding_block(rigid, floor_density))
-    rows = np.arange(sim.bodies[0].lo, sim.bodies[0].hi)
+    rows = np.arange(sim.state.bodies[0].lo, sim.state.bodies[0].hi)
     mass = sim.quantity("mass", rows)
 
     def speed():
@@ -283,7 +283,7 @@ def test_self_contact_of_one_body_is_contact_of_two_where_the_kernel_does_not_jo
     runs = []
     for one_body in (False, True):
         sim = simulation(bars_with_a_gap(one_body))
-        assert len(sim.bodies) == (1 if one_body else 2)
+        assert len(sim.state.bodies) == (1 if one_body else 2)
         h = run_until(sim, 1.4e-4, every=50)
         runs.append((sim.quantity("position"), sim.quantity("velocity"), h))
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
@@ -327,7 +327,7 @@ def test_steel_disk_perforates_the_aluminium_plate_with_the_energy_balance_close
                                       f"bodies.0.material.break_pairs={str(breaking).lower()}",
                                       f'formulation.hourglass_form="{form}"'])
     h = run_until(sim, 1.5e-5, every=50)
-    body = sim.bodies[1]
+    body = sim.state.bodies[1]
     centre = sim.quantity("position", np.arange(body.lo, body.hi))[:, 1].mean()
     assert centre < -4.0e-3  # below the plate's back face
     assert -500.0 < h["projectile_velocity"][-1] < -400.0

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from conftest import RUNS
-from parsph import conditions
 from parsph.diagnostics import global_diagnostics
 from parsph.errors import InputError
 from parsph.formulations import reference
@@ -40,23 +39,23 @@ def assert_broken(sim) -> None:
     reference data (the kept lists of an updated reference) holds the pairs and gradients a
     search in the same reference, filtered the same way, gives (reference.build without a
     skin)."""
-    n = sim.n_owned
+    n = sim.state.n_owned
     detached = sim.failure.detached
     relation, = sim.topology.relations  # the scenes here are one group of bodies
     ref = relation.ref
     assert detached[:n].sum() > 0 and len(sim.failure.cut) > 0
     assert np.all(np.diff(ref.ptr)[detached[:n]] == 0) and not detached[ref.idx].any()
     rows = np.repeat(np.arange(n), np.diff(ref.ptr))
-    assert not np.isin(pair_keys(sim.gid[rows], sim.gid[ref.idx]), sim.failure.cut).any()
-    X, measure, volume = (sim.Xr, sim.measure_r, sim.volume_r) if sim.updated else (sim.X, sim.measure, sim.volume)
-    searched = reference.build(X, measure, volume, sim.support, sim.gid, n, sim.decomp.n_rows,
-                               relation.kernel, sim.body, relation.options, relation.eta,
+    assert not np.isin(pair_keys(sim.state.gid[rows], sim.state.gid[ref.idx]), sim.failure.cut).any()
+    X, measure, volume = (sim.state.Xr, sim.state.measure_r, sim.state.volume_r) if sim.state.updated else (sim.state.X, sim.state.measure, sim.state.volume)
+    searched = reference.build(X, measure, volume, sim.state.support, sim.state.gid, n, sim.state.decomp.n_rows,
+                               relation.kernel, sim.state.body, relation.options, relation.eta,
                                relation.weighted_hessian, detached=detached, cut=sim.failure.cut)
-    unbroken = reference.build(X, measure, volume, sim.support, sim.gid, n, sim.decomp.n_rows,
-                               relation.kernel, sim.body, relation.options, relation.eta,
+    unbroken = reference.build(X, measure, volume, sim.state.support, sim.state.gid, n, sim.state.decomp.n_rows,
+                               relation.kernel, sim.state.body, relation.options, relation.eta,
                                relation.weighted_hessian, tolerant=True)
     assert len(ref.idx) < len(unbroken.idx)  # fewer pairs than the same reference without breaking
-    assert ref.kept is not None or not sim.updated
+    assert ref.kept is not None or not sim.state.updated
     np.testing.assert_array_equal(ref.ptr, searched.ptr)
     np.testing.assert_array_equal(ref.idx, searched.idx)
     np.testing.assert_allclose(ref.g, searched.g, rtol=0, atol=1e-9 * np.abs(searched.g).max())
@@ -160,13 +159,13 @@ def test_a_half_strip_with_a_symmetry_plane_breaks_as_the_whole(updated):
         force = []
         while sim.t < 2.5e-5:
             sim.step(2.5e-5)
-            force.append(float(conditions.reaction(sim)[sim.group_index("pulled"), 0].sum()))
-        n = sim.n_owned
+            force.append(float(sim.conditions.reaction(sim.state)[sim.group_index("pulled"), 0].sum()))
+        n = sim.state.n_owned
         d = global_diagnostics(sim)
         assert abs(d["total_energy"]) < 0.01 * d["external_work"]
-        out[name] = (np.array(force), sim.X[:n][sim.failure.detached[:n]])
+        out[name] = (np.array(force), sim.state.X[:n][sim.failure.detached[:n]])
         if name == "half":
-            images = sim.failure.detached[n:][sim.gid[n:] >= sim.decomp.total]
+            images = sim.failure.detached[n:][sim.state.gid[n:] >= sim.state.decomp.total]
             assert images.any()
     (whole, failed), (half, failed_half) = out["whole"], out["half"]
     assert len(failed_half) > 10 and len(whole) == len(half)

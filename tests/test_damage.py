@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from conftest import assert_identical_outputs, assert_it_happened, parsph
-from parsph import conditions
 from parsph.diagnostics import global_diagnostics
 from parsph.materials import damage
 from physics import simulation
@@ -135,18 +134,18 @@ def test_notched_strip_breaks_across_the_notch_and_the_energy_balance_closes():
     peak = 0.0
     while sim.t < 1.3e-5:  # the crack has crossed the neck
         sim.step(1.3e-5)
-        peak = max(peak, float(conditions.reaction(sim)[sim.group_index("pulled"), 0].sum()))
+        peak = max(peak, float(sim.conditions.reaction(sim.state)[sim.group_index("pulled"), 0].sum()))
     d = global_diagnostics(sim)
     assert abs(d["total_energy"]) < 1e-3 * d["external_work"]  # the balance closes
     assert d["damage_work"] > 0  # the work the failed particles took, now dissipated
-    n = sim.n_owned
+    n = sim.state.n_owned
     D = sim.quantity("damage", np.arange(n))
     failed = D == 1.0
-    X = sim.X[:n]
+    X = sim.state.X[:n]
     assert np.all(np.abs(X[failed, 0] - 12e-3) < 4.5e-3)  # at the neck (10-14 mm) and its corners
     neck_rows = np.unique(X[(X[:, 1] > 1e-3) & (X[:, 1] < 5e-3), 1])
     assert np.isin(neck_rows, X[failed, 1]).all()  # the crack crosses every row of the neck
-    force = float(conditions.reaction(sim)[sim.group_index("pulled"), 0].sum())
+    force = float(sim.conditions.reaction(sim.state)[sim.group_index("pulled"), 0].sum())
     assert peak > 0 and abs(force) < 0.2 * peak  # no longer carries the load
 
 
@@ -155,7 +154,7 @@ def pair_components(sim) -> np.ndarray:
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    n, ref = sim.n_owned, sim.topology.relations[0].ref
+    n, ref = sim.state.n_owned, sim.topology.relations[0].ref
     graph = csr_matrix((np.ones(len(ref.idx)), ref.idx, ref.ptr), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 
@@ -176,7 +175,7 @@ def test_with_pair_breaking_the_crack_opens_and_the_strip_comes_apart(breaking):
         sim.step(2.5e-5)
         d = global_diagnostics(sim)
         worst = max(worst, abs(d["total_energy"]) / d["external_work"]) if sim.step_count > 20 else 0.0
-    n = sim.n_owned
+    n = sim.state.n_owned
     failed = sim.quantity("damage", np.arange(n)) == 1.0
     label = pair_components(sim)
     intact = np.unique(label[~failed])
@@ -187,7 +186,7 @@ def test_with_pair_breaking_the_crack_opens_and_the_strip_comes_apart(breaking):
     assert failed.sum() > 10 and not np.isin(np.flatnonzero(failed), sim.topology.relations[0].ref.idx).any()
     assert np.all(np.diff(sim.topology.relations[0].ref.ptr)[failed] == 0)
     assert len(intact) == 2 and len(np.unique(held)) == len(np.unique(pulled)) == 1 and held[0] != pulled[0]
-    x = sim.X[:n] + sim.u[:n]
+    x = sim.state.X[:n] + sim.state.u[:n]
     a, b = x[label == held[0]], x[label == pulled[0]]
     gap = np.sqrt(((a[:, None] - b[None]) ** 2).sum(axis=2)).min()
     assert gap > 1.5 * 0.5e-3  # the spacing s
@@ -210,16 +209,16 @@ def test_with_self_contact_the_faces_of_a_crack_push_apart_instead_of_passing_th
     while sim.t < 2.0e-5:
         sim.step(2.0e-5)
     label = pair_components(sim)
-    n = sim.n_owned
+    n = sim.state.n_owned
     held, pulled = label[sim.group_index("held")][0], label[sim.group_index("pulled")][0]
     assert held != pulled  # broken in two
-    for c in sim.bcs.items:
+    for c in sim.conditions.bcs.items:
         if c.kind == "velocity":
             c.value = -c.value
     closest = np.inf
     while sim.t < 5.0e-5:
         sim.step(5.0e-5)
-        x = sim.X[:n] + sim.u[:n]
+        x = sim.state.X[:n] + sim.state.u[:n]
         a, b = x[label == held], x[label == pulled]
         closest = min(closest, np.sqrt(((a[:, None] - b[None]) ** 2).sum(axis=2)).min())
     if self_contact:

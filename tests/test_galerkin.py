@@ -45,7 +45,7 @@ def lattice(method: str, extra=()):
 
 def integration_points(sim):
     """The point sets of a Galerkin run other than the particles (one or none)."""
-    return list(sim.sets.values())
+    return list(sim.state.sets.values())
 
 
 @pytest.mark.parametrize("lower, upper, spacing", [
@@ -98,21 +98,21 @@ def test_affine_motion_exact_at_every_integration_point_rigid_rotation_stress_fr
     stress or Gauss point (to round-off), boundaries included; a rigid rotation by 40°
     gives zero strain energy and zero forces."""
     sim = lattice(method)
-    n = sim.n_owned
+    n = sim.state.n_owned
     others = integration_points(sim)
     assert [p.total for p in others] == {"kbm": [15 * 15], "efg_nodal": [], "efg_cells": [32 * 32]}[method]
-    sim.u[:] = sim.X @ H_AFFINE.T
+    sim.state.u[:] = sim.state.X @ H_AFFINE.T
     sim.compute_forces()
     assert np.abs(sim.quantity("deformation_gradient") - np.eye(2) - H_AFFINE).max() < 1e-14
     for p in others:
         assert np.abs(p.arrays["F"][: p.n_owned] - np.eye(2) - H_AFFINE).max() < 1e-14
     th = math.radians(40.0)
     R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
-    sim.u[:] = sim.X @ (R - np.eye(2)).T
+    sim.state.u[:] = sim.state.X @ (R - np.eye(2)).T
     sim.compute_forces()
-    assert np.abs(sim.psi[:n]).max() < 1e-20
+    assert np.abs(sim.state.psi[:n]).max() < 1e-20
     assert all(np.abs(p.arrays["psi"]).max() < 1e-20 for p in others)
-    assert np.abs(sim.f_int[:n]).max() < 1e-9  # forces of a 1e6 Pa body over 0.01 m^2: scale 1e4 N
+    assert np.abs(sim.state.f_int[:n]).max() < 1e-9  # forces of a 1e6 Pa body over 0.01 m^2: scale 1e4 N
 
 
 # largest force three or more rows in from a free edge under uniform stress, against the edge's
@@ -130,19 +130,19 @@ def test_uniform_stress_interior_forces_and_linear_momentum(method):
     point), and free motion from random velocities keeps the total momentum to round-off
     over 200 steps."""
     sim = lattice(method)
-    n = sim.n_owned
-    sim.u[:] = sim.X @ H_AFFINE.T
+    n = sim.state.n_owned
+    sim.state.u[:] = sim.state.X @ H_AFFINE.T
     sim.compute_forces()
-    force = np.linalg.norm(sim.f_int[:n], axis=1)
+    force = np.linalg.norm(sim.state.f_int[:n], axis=1)
     rows = edge_row(sim)
     assert force[rows == 0].min() > 100.0
     assert force[rows >= 3].max() < INTERIOR[method] * force.max()
     if method == "efg_cells":
         assert force[rows >= 3].max() > 1e-3 * force.max()
-    assert np.abs(sim.f_int[:n].sum(axis=0)).max() < 1e-13 * force.max() * n
+    assert np.abs(sim.state.f_int[:n].sum(axis=0)).max() < 1e-13 * force.max() * n
     sim = lattice(method)
     rng = np.random.default_rng(1)
-    sim.v[:n] = 0.05 * rng.standard_normal((n, 2))
+    sim.state.v[:n] = 0.05 * rng.standard_normal((n, 2))
     momentum = lambda: (sim.quantity("mass")[:, None] * sim.quantity("velocity")).sum(axis=0)  # noqa: E731
     scale = np.abs(sim.quantity("mass")[:, None] * sim.quantity("velocity")).sum()
     p0 = momentum()
@@ -160,10 +160,10 @@ def test_efg_force_is_the_strain_energy_gradient_kbm_is_not(method):
     functions are not its trial functions: the force differs by about 1.5 %."""
     sim = lattice(method)
     rng = np.random.default_rng(0)
-    sim.u[:] = 1e-3 * rng.standard_normal(sim.u.shape)
+    sim.state.u[:] = 1e-3 * rng.standard_normal(sim.state.u.shape)
     sim.compute_forces()
     i = 100
-    force = sim.f_int[i].copy()
+    force = sim.state.f_int[i].copy()
 
     def energy():
         sim.compute_forces()
@@ -233,7 +233,7 @@ def test_stress_and_gauss_points_need_one_box_nodal_efg_takes_any_set_and_symmet
     sim = simulation("patch_random", [*METHODS["efg_nodal"], "formulation.hourglass=0",
                                       "geometry.parts.0.count=200", 'kernel.type="cubic_spline"'])
     # the irregular set reproduces linear fields too
-    sim.u[: sim.n_owned] = sim.quantity("reference_position") @ H_AFFINE.T
+    sim.state.u[: sim.state.n_owned] = sim.quantity("reference_position") @ H_AFFINE.T
     sim.compute_forces()
     assert np.abs(sim.quantity("deformation_gradient") - np.eye(2) - H_AFFINE).max() < 1e-13
     with pytest.raises(InputError, match="integration applies to type = 'efg'"):
@@ -302,7 +302,7 @@ def test_rod_gaussian_pulse_every_method_against_dalembert():
     for method, expected in ROD.items():
         extra = METHODS.get(method, [f'formulation.type="{method}"'])
         sim = simulation("rod", [*extra, "parameters.dx=5e-4"])
-        n = sim.n_owned
+        n = sim.state.n_owned
         got = []
         for t_end in (1.155e-5, 2.31e-5):
             sim.step(t_end)
@@ -334,7 +334,7 @@ def test_rod_boundary_particles_with_lumped_masses_reflect_no_better():
     for method, expected in ROD_LUMPED.items():
         extra = METHODS.get(method, [f'formulation.type="{method}"'])
         sim = simulation("rod", [*extra, "parameters.dx=5e-4", 'geometry.parts.0.placement="node"'])
-        n = sim.n_owned
+        n = sim.state.n_owned
         assert n == 121 * 11
         X, mass = sim.quantity("reference_position"), sim.quantity("mass")
         edge = np.isclose(X[:, 0], 0.0) | np.isclose(X[:, 0], 0.06)
@@ -364,28 +364,28 @@ def test_clamp_is_collocated_through_the_mls_functions_kbm_takes_particle_values
     corrected gradients are exact for linear particle data; collocating its Shepard
     functions, 23 % off here, made the cantilever less accurate)."""
     sim = simulation("cantilever", METHODS[method])
-    n = sim.n_owned
+    n = sim.state.n_owned
     while sim.t < 0.05:
         sim.step(0.05)
-    coupling = sim.bodies[0].formulation.couplings[0]
+    coupling = sim.state.bodies[0].formulation.couplings[0]
     clamp = sim.group_index("clamp")
 
     def approximation(y):
         return np.array([coupling.phi[coupling.ptr[i]: coupling.ptr[i + 1]]
                          @ y[coupling.idx[coupling.ptr[i]: coupling.ptr[i + 1]]] for i in clamp])
 
-    u_bar, v_bar = sim.u.copy(), sim.v.copy()
-    sim.bcs.set_displacement(u_bar[:n], sim.t)
-    sim.bcs.set_velocity(v_bar[:n], sim.t)
+    u_bar, v_bar = sim.state.u.copy(), sim.state.v.copy()
+    sim.conditions.bcs.set_displacement(u_bar[:n], sim.t)
+    sim.conditions.bcs.set_velocity(v_bar[:n], sim.t)
     scale_u, scale_v = np.abs(u_bar[clamp]).max(), np.abs(v_bar[clamp]).max()
     assert scale_u > 0 and scale_v > 0
     if method == "kbm":
         assert np.array_equal(sim.quantity("displacement", clamp), u_bar[clamp])
         assert np.array_equal(sim.quantity("velocity", clamp), v_bar[clamp])
-        assert np.abs(approximation(sim.u) - u_bar[clamp]).max() > 0.1 * scale_u
+        assert np.abs(approximation(sim.state.u) - u_bar[clamp]).max() > 0.1 * scale_u
         return
-    assert np.abs(approximation(sim.u) - u_bar[clamp]).max() < 1e-12 * scale_u
-    assert np.abs(approximation(sim.v) - v_bar[clamp]).max() < 1e-12 * scale_v
+    assert np.abs(approximation(sim.state.u) - u_bar[clamp]).max() < 1e-12 * scale_u
+    assert np.abs(approximation(sim.state.v) - v_bar[clamp]).max() < 1e-12 * scale_v
     assert np.abs(sim.quantity("displacement", clamp) - u_bar[clamp]).max() > 0.01 * scale_u
 
 

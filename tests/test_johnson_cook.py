@@ -116,7 +116,7 @@ def test_copper_rod_impact_keeps_the_balance_with_its_heat():
     assert h["plastic_work"][-1] > 0.8 * initial and h["kinetic_energy"][-1] < 0.05 * initial
     for a in "xy":
         assert np.abs(h[f"momentum_{a}"]).max() < 1e-10 * initial / 190.0
-    owned = np.arange(sim.n_owned)
+    owned = np.arange(sim.state.n_owned)
     work, temperature = sim.quantity("plastic_work", owned), sim.quantity("temperature", owned)
     heat = COPPER["taylor_quinney"] / (COPPER["density"] * COPPER["specific_heat"])
     room = sim.scene.material.room_temperature

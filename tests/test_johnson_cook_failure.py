@@ -220,7 +220,7 @@ def test_a_pulled_bar_breaks_where_its_plastic_strain_reached_the_strain_to_frac
         return force
 
     h = run_until(sim, 1.0e-4, every=20, probe=pull)
-    state = sim.damage_state(sim.bodies[0])[0][: sim.n_owned]
+    state = sim.state.damage_state(sim.state.bodies[0])[0][: sim.state.n_owned]
     failed = state[:, damage.DAMAGE] >= 1.0
     assert failed.any()
     assert np.all(state[failed, jcf.INDEX] >= 1.0) and np.all(state[~failed, jcf.INDEX] < 1.0)

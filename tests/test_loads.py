@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from parsph import conditions
 from parsph.analytic import driven_rod_velocity, timoshenko_cantilever
 from physics import block_2d, run_until, scene_from, simulation
 
@@ -48,8 +47,8 @@ def test_a_uniform_traction_stretches_a_plate_uniformly():
     sim = simulation(block_2d(extra="damping = 30.0") + TENSION, ["time.end=2.0"])
     run_until(sim, 2.0, every=100000)
     right = sim.group_index("right")
-    assert np.sum(conditions.external_force(sim)[right, 0]) == pytest.approx(1.2e4, rel=1e-12)
-    assert np.sum(conditions.reaction(sim)[:, 0]) == pytest.approx(-1.2e4, rel=1e-9)
+    assert np.sum(sim.conditions.external_force(sim.state, sim.t)[right, 0]) == pytest.approx(1.2e4, rel=1e-12)
+    assert np.sum(sim.conditions.reaction(sim.state)[:, 0]) == pytest.approx(-1.2e4, rel=1e-9)
     assert np.abs(sim.quantity("velocity")).max() < 1e-9
     strain = (sim.quantity("deformation_gradient")[:, 0, 0] - 1.0) / (2e4 * (1 - 0.3 ** 2) / 1e6)
     middle = np.abs(sim.quantity("reference_position")[:, 0] - 0.5) < 0.3
@@ -75,8 +74,8 @@ def test_cantilever_end_load_has_the_force_and_moment_of_the_exact_one(n):
     there would give P (L - h/2) and make the tip about 3h/(4L) too stiff)."""
     sim = simulation("cantilever", [f"parameters.n={n}"])
     tip = sim.group_index("tip")
-    force = np.zeros((sim.n_owned, 2))
-    sim.tractions.add(force, 1.0)
+    force = np.zeros((sim.state.n_owned, 2))
+    sim.conditions.tractions.add(force, 1.0)
     assert np.array_equal(np.flatnonzero(np.any(force != 0.0, axis=1)), tip)
     assert np.sum(force[tip, 0]) == pytest.approx(0.0, abs=1e-12 * 1000.0)
     assert np.sum(force[tip, 1]) == pytest.approx(1000.0, rel=1e-13)
@@ -136,12 +135,12 @@ def test_a_velocity_pulse_drives_the_rod_end_then_releases_it():
     while sim.t < duration:
         sim.step()
         if sim.t < duration:
-            assert sim.bcs.active_items(sim.t) == (0,) and np.all(sim.quantity("velocity", left)[:, 0] == speed)
+            assert sim.conditions.bcs.active_items(sim.t) == (0,) and np.all(sim.quantity("velocity", left)[:, 0] == speed)
     for end in (0.75 * length / c, 1.5 * length / c):
         while sim.t < end:
             sim.step()
             momentum.append(np.sum(sim.quantity("mass") * sim.quantity("velocity")[:, 0]))
-        assert sim.bcs.active_items(sim.t) == () and not sim.bcs.mask.any()
+        assert sim.conditions.bcs.active_items(sim.t) == () and not sim.conditions.bcs.mask.any()
         assert np.abs(sim.quantity("velocity", left)).max() < 0.03 * speed
         exact = driven_rod_velocity(sim.quantity("reference_position")[:, 0] - x0, sim.t, length - x0, c, speed,
                                     duration)

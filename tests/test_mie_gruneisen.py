@@ -87,13 +87,13 @@ def test_johnson_cook_strength_under_the_shock_pressure():
     sim = simulation("flyer_plate", strength)
     while sim.t < 2e-6:
         sim.step(2e-6)
-    n, body = sim.n_owned, sim.bodies[0]
+    n, body = sim.state.n_owned, sim.state.bodies[0]
     owned = np.arange(n)
     X, v = sim.quantity("reference_position")[:, 0], sim.quantity("velocity")[:, 0]
     front = X[(X > 0) & (v > 250.0)].max()
     assert front / 2e-6 == pytest.approx(3940.0 + 1.49 * 500.0, rel=0.01)  # measured -0.3 %
     behind = (X > 0.3 * front) & (X < front - 5e-4)
-    committed, trial = sim.material_state(body)
+    committed, trial = sim.state.material_state(body)
     state = trial[:n].copy()  # the flow stress of the new plastic strain at the step's temperature
     state[:, PLASTIC_WORK] = committed[:n, PLASTIC_WORK]
     flow = body.law.plastic.yield_stress(body.constants.values, state)

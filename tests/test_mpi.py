@@ -85,6 +85,22 @@ def test_neighbours_and_gradients_across_rank_boundaries(dim, ranks, cells):
 
 
 @pytest.mark.mpi
+def test_a_halo_puts_each_owners_value_in_its_ghost_rows():
+    """On 3 ranks: the points within reach of a rank's box are its ghosts, and a Halo's exchange
+    puts each owner's values in their rows, in blocks by owner or interleaved."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, mpiexec
+
+    script = ROOT / "tests" / "mpi" / "halo_exchange_check.py"
+    proc = subprocess.run([mpiexec(), "-n", "3", sys.executable, str(script)],
+                          capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "OK" in proc.stdout
+
+
+@pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3, 4])
 def test_parallel_build_equals_the_single_process_build(ranks):
     """Each rank generates only its block of the parts; unions, neighbour-count supports and

@@ -46,7 +46,7 @@ def random_patch(ftype: str):
 
 
 def impose_affine(sim, H=H_AFFINE):
-    sim.u[:] = sim.X @ np.asarray(H).T
+    sim.state.u[:] = sim.state.X @ np.asarray(H).T
     sim.compute_forces()
 
 
@@ -114,7 +114,7 @@ def test_affine_motion_of_a_random_set_rlm_exact_sph_not_even_inside():
                                      "geometry.parts.0.count=200"])
     u = 0.01 * np.random.default_rng(5).standard_normal(tl.u.shape)
     for sim in (tl, rlm):
-        sim.u[:] = u
+        sim.state.u[:] = u
         sim.compute_forces()
     assert np.array_equal(rlm.quantity("deformation_gradient"), tl.quantity("deformation_gradient"))
 
@@ -128,7 +128,7 @@ def test_uniform_stress_interior_forces_vanish_edge_forces_carry_m_or_twice_the_
     for ftype, deep, expected in (("sph", 2, M_LATTICE), ("rlm", 1, 2.0), ("tlsph", 2, 1.0)):
         sim = lattice(ftype)
         impose_affine(sim)
-        n = sim.n_owned
+        n = sim.state.n_owned
         X, row = sim.quantity("reference_position"), edge_row(sim)
         force = sim.quantity("force")
         scale = np.abs(force).max()
@@ -136,7 +136,7 @@ def test_uniform_stress_interior_forces_vanish_edge_forces_carry_m_or_twice_the_
         # uniform everywhere (exact F), so only the edge row is loaded
         assert np.abs(force[row >= deep]).max() < 1e-12 * scale, ftype
         assert np.abs(force[row < deep]).max() == scale
-        P = sim.VP[:n] / sim.quantity("volume")[:, None, None]
+        P = sim.state.VP[:n] / sim.quantity("volume")[:, None, None]
         middle = np.argmin(np.abs(X - 0.75).sum(axis=1))
         along = (np.abs(X[:, 1] - 0.75) < 1e-9) & (X[:, 0] > 0.8)  # a row, middle to right edge
         row_force = force[along].sum(axis=0)
@@ -151,17 +151,17 @@ def test_sph_force_is_the_energy_gradient_rlm_force_is_not():
     mismatch = {}
     for ftype in ("sph", "rlm"):
         sim = simulation(block_2d(), [f'formulation.type="{ftype}"', *KERNEL])
-        n = sim.n_owned
+        n = sim.state.n_owned
         rng = np.random.default_rng(4)
         u0 = 0.01 * rng.standard_normal((n, 2))
         du = rng.standard_normal((n, 2))
-        sim.u[:n] = u0
+        sim.state.u[:n] = u0
         sim.compute_forces()
         power = -(sim.quantity("force") * du).sum()
         eps = 1e-6
         energies = []
         for sign in (1.0, -1.0):
-            sim.u[:n] = u0 + sign * eps * du
+            sim.state.u[:n] = u0 + sign * eps * du
             sim.compute_forces()
             energies.append(sim.ledger.local(sim, "strain"))
         derivative = (energies[0] - energies[1]) / (2 * eps)
@@ -178,11 +178,11 @@ def test_linear_momentum_sph_conserved_to_round_off_rlm_drifts():
     drift, net_force = {}, {}
     for ftype in ("sph", "rlm"):
         sim = simulation(block_2d(), [f'formulation.type="{ftype}"', *KERNEL])
-        n = sim.n_owned
+        n = sim.state.n_owned
         X = sim.quantity("reference_position")
         x, y = X[:, 0], X[:, 1]
-        sim.v[:n, 0] = 0.5 * np.sin(np.pi * x) * np.cos(2.0 * y)
-        sim.v[:n, 1] = 0.3 * np.cos(1.5 * x) * np.sin(np.pi * y / 0.6)
+        sim.state.v[:n, 0] = 0.5 * np.sin(np.pi * x) * np.cos(2.0 * y)
+        sim.state.v[:n, 1] = 0.3 * np.cos(1.5 * x) * np.sin(np.pi * y / 0.6)
         m = sim.quantity("mass")[:, None]
         p0 = (m * sim.quantity("velocity")).sum(axis=0)
         scale = (m * np.abs(sim.quantity("velocity"))).sum()

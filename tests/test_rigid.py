@@ -73,7 +73,7 @@ end = 4.0e-3
 
 
 def disk_particles(sim) -> np.ndarray:
-    body = sim.bodies[1]
+    body = sim.state.bodies[1]
     return np.arange(body.lo, body.hi)
 
 
@@ -86,7 +86,7 @@ def test_a_free_rigid_body_falls_and_spins_as_newton_and_euler_say():
     sim = simulation(text)
     rows = disk_particles(sim)
     X = sim.quantity("reference_position", rows)
-    centre0 = sim.rigid_bodies[0].centre0
+    centre0 = sim.conditions.rigid_bodies[0].centre0
     while sim.t < 2e-3:
         sim.step()
     t = sim.t
@@ -126,7 +126,7 @@ def test_the_history_gives_the_force_and_torque_the_rigid_body_takes():
     torque in the history integrated over the steps (each step's kicks: the trapezoidal
     rule), to round-off."""
     sim = simulation(DISK)
-    body = sim.rigid_bodies[0]
+    body = sim.conditions.rigid_bodies[0]
     spin = body.inertia0[0, 0] * body.omega[0]
     h = run_until(sim, 1e-3)
     assert np.abs(h["rigid_torque.disk"]).max() > 0
@@ -144,11 +144,11 @@ def friction_impact(spacing: float, friction: float) -> tuple:
         'bodies = ["block", "disk"]', f'bodies = ["block", "disk"]\nfriction = {friction}').replace(
         "omega = [300.0]", "omega = [0.0]").replace("value = [1.0, -5.0]", "value = [20.0, -5.0]")
     sim = simulation(text)
-    disk = sim.bodies[1]
+    disk = sim.state.bodies[1]
     start, impulse = sim.diagnostics()["angular_momentum"], np.zeros(2)
     while sim.t < 4e-3:
         dt = sim.step()
-        impulse += dt * sim.contact.dissipation[disk.lo:disk.hi].sum(axis=0)  # its kicks: the same each step
+        impulse += dt * sim.interactions.contact.dissipation[disk.lo:disk.hi].sum(axis=0)  # its kicks: the same each step
     return sim.diagnostics()["angular_momentum"] - start, np.linalg.norm(impulse)
 
 
@@ -193,7 +193,7 @@ def test_a_free_rigid_disk_meets_a_wall_as_a_rigid_body_plastically_and_the_bala
     if gravity:
         text += f"[loads]\nbody_acceleration = [0.0, {-gravity}]\n"
     sim = simulation(text)
-    body, rows = sim.rigid_bodies[0], disk_particles(sim)
+    body, rows = sim.conditions.rigid_bodies[0], disk_particles(sim)
     x0 = sim.quantity("position", rows)
     h = run_until(sim, 2e-4, every=5)
     impact = h["kinetic_energy"][0]
@@ -219,7 +219,7 @@ def test_a_rigid_body_held_by_a_condition_moves_as_it_says_and_a_part_cannot_be_
     held = DISK + '[[bc]]\ntype = "velocity"\ngroup = "disk"\nvalue = [0.0, -2.0]\n'
     sim = simulation(held)
     rows = disk_particles(sim)
-    assert not sim.rigid_bodies
+    assert not sim.conditions.rigid_bodies
     while sim.t < 1e-3:
         sim.step()
     assert np.allclose(sim.quantity("displacement", rows), [0.0, -2.0 * sim.t], rtol=1e-12, atol=0)

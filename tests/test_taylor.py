@@ -41,7 +41,7 @@ def test_energy_balance_closes_and_plastic_work_takes_the_kinetic_energy(stabili
     # the wall takes the kinetic energy of the particles it stops: at least the bottom row's
     rows = 67
     assert -end["external_work"] > initial / rows
-    strain = sim.quantity("plastic_strain", np.arange(sim.n_owned))
+    strain = sim.quantity("plastic_strain", np.arange(sim.state.n_owned))
     assert strain.min() >= 0.0 and strain.max() > 0.5
     X = sim.quantity("reference_position")
     bottom = X[:, 1] < 1e-3  # the foot has flowed, the top barely (the reflected

@@ -44,12 +44,12 @@ poisson_ratio = 0.0
 
 def face_series(sim) -> tuple:
     """(displacement of the left bar's last particle, the tie force on the left bar, broken ties)."""
-    i = sim.group_index("left_face") if "left_face" in sim.groups else np.zeros(0, int)
-    ties = sim.ties
-    left = sim.bodies[0]
+    i = sim.group_index("left_face") if "left_face" in sim.state.groups else np.zeros(0, int)
+    ties = sim.interactions.ties
+    left = sim.state.bodies[0]
     force = float(ties.entry_force[0, left.lo:left.hi].sum()) if ties is not None else 0.0
     broken = int(np.count_nonzero(ties.broken)) if ties is not None else 0
-    return float(sim.u[i, 0].sum()), force, broken
+    return float(sim.state.u[i, 0].sum()), force, broken
 
 
 def test_bonded_bars_below_the_strength_carry_the_wave_as_one_bar():
@@ -94,8 +94,8 @@ def test_the_tie_breaks_when_the_reflected_wave_brings_its_strength_and_the_bars
     assert abs(t[at] / (3.0 * L / WAVE_SPEED) - 1.0) < 0.01
     assert abs(force[:at].max() / (STRENGTH * AREA) - 1.0) < 0.03
     assert (force[at:] == 0.0).all()
-    gap = (sim.X[sim.group_index("right_face"), 0] + sim.u[sim.group_index("right_face"), 0]
-           - sim.X[sim.group_index("left_face"), 0] - sim.u[sim.group_index("left_face"), 0])
+    gap = (sim.state.X[sim.group_index("right_face"), 0] + sim.state.u[sim.group_index("right_face"), 0]
+           - sim.state.X[sim.group_index("left_face"), 0] - sim.state.u[sim.group_index("left_face"), 0])
     # released, the faces part at 2V each (the left from stress 2 sigma at rest, the right from sigma
     # at V) until the release waves return, 2L/c later
     assert abs((gap[0] - 5.0e-4) / (4.0 * SPEED * (t[-1] - t[at])) - 1.0) < 0.05
@@ -134,14 +134,14 @@ def test_bonded_strips_in_2d_carry_the_wave_and_break_together_at_the_strength()
     face = 4.0e-3 * 1.0e-2
 
     def probe(sim):
-        left = sim.bodies[0]
-        pull = sim.ties.entry_force[0, left.lo:left.hi].sum(axis=0)
-        return pull[0], pull[1], int(np.count_nonzero(sim.ties.broken))
+        left = sim.state.bodies[0]
+        pull = sim.interactions.ties.entry_force[0, left.lo:left.hi].sum(axis=0)
+        return pull[0], pull[1], int(np.count_nonzero(sim.interactions.ties.broken))
 
     rows = run_until(sim, 4.0e-5, probe=probe)
     pull, lateral, broken = (np.array([p[k] for p in rows["probe"]]) for k in range(3))
     t = rows["time"]
-    assert len(sim.ties.broken) == 8  # 4 pairs, each on both of its particles
+    assert len(sim.interactions.ties.broken) == 8  # 4 pairs, each on both of its particles
     first = (t > 1.5 * L / WAVE_SPEED) & (t < 2.5 * L / WAVE_SPEED)
     assert abs(pull[first].mean() / (SIGMA * face) - 1.0) < 0.01
     assert np.abs(lateral).max() < 1.0e-9 * np.abs(pull).max()
@@ -159,7 +159,7 @@ def test_with_contact_the_tie_breaks_alike_and_both_springs_bound_the_step():
     text = SCENE.replace("[[ties]]", '[[contact]]\nbodies = ["left", "right"]\n\n[[ties]]')
     sim = simulation(text)
     assert [i.name for i in sim.interactions] == ["contact", "ties"]
-    assert (sim.omega_c2 == sim.contact.omega2 + sim.ties.omega2).all() and sim.ties.omega2.max() > 0
+    assert (sim.interactions.omega2 == sim.interactions.contact.omega2 + sim.interactions.ties.omega2).all() and sim.interactions.ties.omega2.max() > 0
     rows = run_until(sim, 3.5e-5, probe=face_series)
     broken = np.array([p[2] for p in rows["probe"]])
     assert abs(rows["time"][np.argmax(broken > 0)] / (3.0 * L / WAVE_SPEED) - 1.0) < 0.01

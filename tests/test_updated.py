@@ -84,10 +84,10 @@ def acceleration_jump_at_update(correction):
     sim.topology.relations[0].every = 10**9  # updates by hand from here
     sim.update_reference()
     sim.step()
-    n = sim.n_owned
-    before = sim.acc[np.argsort(sim.gid[:n])]
+    n = sim.state.n_owned
+    before = sim.state.acc[np.argsort(sim.state.gid[:n])]
     sim.update_reference()  # the update itself moves nothing: ideally no force changes
-    after = sim.acc[np.argsort(sim.gid[:n])]
+    after = sim.state.acc[np.argsort(sim.state.gid[:n])]
     return np.linalg.norm(after - before, axis=1).max() / np.linalg.norm(before, axis=1).max()
 
 
@@ -110,12 +110,12 @@ def test_stabilised_forces_are_minus_the_gradient_of_the_energy(over):
     after an update): it equals -dW/du by finite differences."""
     sim = simulation(block_2d(hourglass=0.0), over)
     rng = np.random.default_rng(0)
-    n = sim.n_owned
-    sim.u[:n] = 0.02 * rng.standard_normal((n, 2))
-    if sim.updated:  # a reference that is not the initial one, and F^r != I
+    n = sim.state.n_owned
+    sim.state.u[:n] = 0.02 * rng.standard_normal((n, 2))
+    if sim.state.updated:  # a reference that is not the initial one, and F^r != I
         sim.step()
         assert sim.topology.count == 1
-        sim.u[:n] += 0.02 * rng.standard_normal((n, 2))
+        sim.state.u[:n] += 0.02 * rng.standard_normal((n, 2))
 
     def energy():
         sim.compute_forces()
@@ -135,20 +135,20 @@ def test_reference_update_keeps_deformation_stress_and_energy():
     """At an update X^r = x, F^r = F, V^r = J V^0 [V §3.1, Remark 1]: F, the stresses and the
     strain energy are unchanged and the motion since the reference is the identity."""
     sim = simulation(block_2d(model="neo_hookean"), UL + ["formulation.update_every=1000"])
-    n = sim.n_owned
+    n = sim.state.n_owned
     X = sim.quantity("reference_position")
-    sim.u[:n] = 0.05 * np.sin(3 * X[:, ::-1]) + X @ np.array([[0.1, 0.05], [-0.02, 0.08]]).T
+    sim.state.u[:n] = 0.05 * np.sin(3 * X[:, ::-1]) + X @ np.array([[0.1, 0.05], [-0.02, 0.08]]).T
     sim.compute_forces()
     F, J, energy = sim.quantity("deformation_gradient"), sim.quantity("J"), sim.ledger.local(sim, "strain")
     volume = sim.quantity("volume").sum()
     sim.update_reference()
-    assert np.abs(sim.fs[:n] - np.eye(2)).max() < 1e-14
+    assert np.abs(sim.state.fs[:n] - np.eye(2)).max() < 1e-14
     assert np.abs(sim.quantity("deformation_gradient") - F).max() < 1e-14
     assert np.abs(sim.quantity("J") - J).max() < 1e-14
     assert abs(sim.ledger.local(sim, "strain") - energy) < 1e-12 * energy
-    assert np.allclose(sim.volume_r[:n].sum(), (J * sim.quantity("volume")).sum(), rtol=1e-14)
+    assert np.allclose(sim.state.volume_r[:n].sum(), (J * sim.quantity("volume")).sum(), rtol=1e-14)
     assert np.allclose(sim.quantity("volume").sum(), volume)  # V^0 is kept for the stress
-    assert np.allclose(sim.Xr[:n], sim.quantity("position"), rtol=0, atol=1e-15)
+    assert np.allclose(sim.state.Xr[:n], sim.quantity("position"), rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize("eta", [0.0, 1.0])
@@ -157,19 +157,19 @@ def test_rigid_rotation_through_many_references_gives_no_strain_or_stress(eta):
     rotation exactly and no stress or force appears."""
     sim = simulation(block_2d(model="neo_hookean"), UL + ["formulation.update_every=1000",
                                                            f"formulation.hessian={eta}"])
-    n = sim.n_owned
+    n = sim.state.n_owned
     X = sim.quantity("reference_position")
     for k in range(1, 10):
         a = np.radians(10.0 * k)
         R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-        sim.u[:n] = X @ R.T - X
+        sim.state.u[:n] = X @ R.T - X
         sim.compute_forces()
         sim.update_reference()
     assert sim.topology.count == 9
     assert np.abs(sim.quantity("deformation_gradient") - R).max() < 1e-12
     volume = sim.quantity("volume")
-    assert np.abs(sim.quantity("force")).max() < 1e-9 * sim.bodies[0].constants.youngs * volume.max() / 0.1
-    assert abs(sim.ledger.local(sim, "strain")) < 1e-15 * sim.bodies[0].constants.youngs * volume.sum()
+    assert np.abs(sim.quantity("force")).max() < 1e-9 * sim.state.bodies[0].constants.youngs * volume.max() / 0.1
+    assert abs(sim.ledger.local(sim, "strain")) < 1e-15 * sim.state.bodies[0].constants.youngs * volume.sum()
 
 
 def test_spinning_body_with_updates_keeps_its_angular_momentum():

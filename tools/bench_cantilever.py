@@ -48,13 +48,13 @@ def displacement(sim: Simulation) -> np.ndarray:
     """The displacement at the owned particles: the particle values, or on an EFG body the
     MLS approximation sum_J Phi_J(X_I) u_J [R eq. 40] (its particle values are not the
     displacement there; KBM keeps the particle values, as its constraints do)."""
-    n = sim.n_owned
-    formulation = sim.bodies[0].formulation
+    n = sim.state.n_owned
+    formulation = sim.state.bodies[0].formulation
     if getattr(formulation, "shape", None) != "mls":
-        return sim.u[:n]
+        return sim.state.u[:n]
     c = formulation.couplings[0]
     rows = np.repeat(np.arange(len(c.ptr) - 1), np.diff(c.ptr))
-    return np.stack([np.bincount(rows, c.phi * sim.u[c.idx, a], len(c.ptr) - 1) for a in range(sim.dim)],
+    return np.stack([np.bincount(rows, c.phi * sim.state.u[c.idx, a], len(c.ptr) - 1) for a in range(sim.state.dim)],
                     axis=1)[:n]
 
 
@@ -65,15 +65,15 @@ def errors(sim: Simulation, u_h: np.ndarray | None = None) -> tuple:
     material = sim.scene.material
     exact = lambda X: timoshenko_cantilever(X, p["L"], p["D"], material["youngs_modulus"],  # noqa: E731
                                             material["poisson_ratio"], p["P"])
-    n = sim.n_owned
-    u, _ = exact(sim.X[:n])
-    u_h = sim.u[:n] if u_h is None else u_h
-    w = sim.volume[:n, None]
+    n = sim.state.n_owned
+    u, _ = exact(sim.state.X[:n])
+    u_h = sim.state.u[:n] if u_h is None else u_h
+    w = sim.state.volume[:n, None]
     l2 = np.sqrt(np.sum(w * (u_h - u) ** 2) / np.sum(w * u ** 2))
     X, F, weight = readouts.quadrature(sim)
     _, strain = exact(X)
     strain_h = 0.5 * (F + np.transpose(F, (0, 2, 1))) - np.eye(2)
-    lam, mu = sim.bodies[0].constants.lam, sim.bodies[0].constants.mu
+    lam, mu = sim.state.bodies[0].constants.lam, sim.state.bodies[0].constants.mu
 
     def energy(e):
         trace = np.trace(e, axis1=1, axis2=2)
@@ -86,7 +86,7 @@ def tip_error(sim: Simulation, u_h: np.ndarray) -> float:
     """Relative error of the tip deflection, the mean vertical displacement of the last column."""
     p, material = sim.scene.parameters, sim.scene.material
     tip = sim.group_index("tip")
-    u, _ = timoshenko_cantilever(sim.X[tip], p["L"], p["D"], material["youngs_modulus"],
+    u, _ = timoshenko_cantilever(sim.state.X[tip], p["L"], p["D"], material["youngs_modulus"],
                                  material["poisson_ratio"], p["P"])
     return float(np.mean(u_h[tip, 1]) / np.mean(u[:, 1]) - 1.0)
 
@@ -112,9 +112,9 @@ def run(method: str, n: int) -> dict:
     while sim.t < end * (1 - 1e-12):
         sim.step(end)
     seconds = time.process_time() - start
-    kinetic = float(0.5 * np.sum(sim.mass[:sim.n_owned, None] * sim.v[:sim.n_owned] ** 2))
+    kinetic = float(0.5 * np.sum(sim.state.mass[:sim.state.n_owned, None] * sim.state.v[:sim.state.n_owned] ** 2))
     strain = sim.ledger.local(sim, "strain")
-    row = {"method": method, "n": n, "particles": sim.n_owned, "spacing": scene.parameters["D"] / n,
+    row = {"method": method, "n": n, "particles": sim.state.n_owned, "spacing": scene.parameters.D / n,
            "steps": sim.step_count, "cpu_seconds": seconds, "kinetic_energy": kinetic, "strain_energy": strain,
            "relaxed": bool(kinetic <= REST * strain), "l2": None, "energy": None, "tip": None}
     if row["relaxed"]:

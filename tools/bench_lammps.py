@@ -252,24 +252,24 @@ def scene(dim: int, side: int, alpha: float, form: str, dt: float, steps: int) -
 def run_parsph(dim, side, alpha, form, dt, warmup, steps, v0) -> dict:
     sc = scene(dim, side, alpha, form, dt, warmup + steps)
     sim = Simulation(sc, build_local(sc, MPI.COMM_SELF), MPI.COMM_SELF)
-    n = sim.n_owned
-    if not np.allclose(sim.volume[:n], (1.0 / side) ** dim, rtol=1e-12):
+    n = sim.state.n_owned
+    if not np.allclose(sim.state.volume[:n], (1.0 / side) ** dim, rtol=1e-12):
         sys.exit("parsph particle volumes are not uniform: not the lattice LAMMPS builds")
-    X = sim.X[:n]
-    sim.v[:n] = velocity_field(X, v0)
+    X = sim.state.X[:n]
+    sim.state.v[:n] = velocity_field(X, v0)
     # the step parsph's own CFL estimate would allow (cfl = 1), for the record
-    stable = float(sim.stable.limit(sim)[0])
+    stable = float(sim.stable.limit(sim.state, sim.topology, sim.interactions, sim.step_count, sim.t)[0])
     for _ in range(warmup):
         sim.step()
     start = time.perf_counter()
     for _ in range(steps):
         sim.step()
     seconds = time.perf_counter() - start
-    v = sim.v[:n].copy()
-    ke = 0.5 * float(np.sum(sim.mass[:n, None] * v * v))
+    v = sim.state.v[:n].copy()
+    ke = 0.5 * float(np.sum(sim.state.mass[:n, None] * v * v))
     return {"seconds": seconds, "steps": steps, "particles": n,
             "neighbours": float(sim.topology.relations[0].ref.ptr[-1]) / n, "stable_dt": stable, "ke": ke,
-            "X": X.copy(), "x": X + sim.u[:n], "v": v, "mass": sim.mass[:n].copy()}
+            "X": X.copy(), "x": X + sim.state.u[:n], "v": v, "mass": sim.state.mass[:n].copy()}
 
 
 def scene_toml(dim: int, side: int, alpha: float, form: str, dt: float, steps: int, v0: float) -> str:

@@ -71,7 +71,7 @@ from mpi4py import MPI
 from rod_error import PAPER as ROD_PAPER
 from rod_error import rod_errors
 
-from parsph import conditions, config, readouts
+from parsph import config, readouts
 from parsph.api import build, load_scene
 from parsph.analytic import bar_tip_displacement, cantilever_stiffness
 from parsph.build import build_local
@@ -186,7 +186,7 @@ def timed_run(sim, end, probe=None, every=1, at=None, clip=False):
 def beam_case(n, overrides):
     sim = simulation("beam_bending", [f"parameters.n={n}"] + overrides, comm=COMM)
     seconds, _, _ = timed_run(sim, sim.scene.time.end)
-    reaction = -COMM.allreduce(conditions.reaction(sim)[sim.group_index("tip"), 1].sum()) / 1e-4
+    reaction = -COMM.allreduce(sim.conditions.reaction(sim.state)[sim.group_index("tip"), 1].sum()) / 1e-4
     exact = cantilever_stiffness(100e9, 0.3, 8e-3, 1e-3, 1e-3)
     return sim, seconds, abs(reaction / exact - 1), n
 
@@ -206,12 +206,12 @@ def bar_case(particles, overrides):
 def gathered(sim):
     """On rank 0, the owned particles and integration points of every rank, as an object
     with what bench_cantilever.errors reads of a Simulation; None on the other ranks."""
-    n = sim.n_owned
-    parts = COMM.gather((sim.X[:n], sim.u[:n], sim.volume[:n], *readouts.quadrature(sim)), root=0)
+    n = sim.state.n_owned
+    parts = COMM.gather((sim.state.X[:n], sim.state.u[:n], sim.state.volume[:n], *readouts.quadrature(sim)), root=0)
     if COMM.rank != 0:
         return None
     X, u, volume, Xq, Fq, wq = (np.concatenate(p) for p in zip(*parts))
-    return SimpleNamespace(scene=sim.scene, bodies=sim.bodies, n_owned=len(X), X=X, u=u, volume=volume,
+    return SimpleNamespace(scene=sim.scene, bodies=sim.state.bodies, n_owned=len(X), X=X, u=u, volume=volume,
                            quadrature=lambda: (Xq, Fq, wq))
 
 
@@ -242,7 +242,7 @@ def rod_case(scene):
     try:
         if COMM.rank == 0:
             with open(os.path.join(folder, "scene.json"), "w") as fh:
-                json.dump(scene.as_dict(), fh)
+                json.dump(scene, fh)
         writer = SnapshotWriter(folder, config.to_json(scene), COMM)
         fields = ["position", "velocity", "displacement"]
         seconds, _, _ = timed_run(sim, scene.time.end, probe=lambda s: writer.write(s, fields),
@@ -273,7 +273,7 @@ def rb_rows(preset: str, problem: str, only: str) -> list:
                 say(f"{problem:10s} {method.name:20s} skipped: {exc}")
                 break
             sim, seconds, errors = (cantilever_case if problem == "cantilever" else rod_case)(scene)
-            n = sim.decomp.total
+            n = sim.state.decomp.total
             primary = errors["error_energy" if problem == "cantilever" else rod_column(rod_times(scene)[-1])]
             rows.append({"problem": problem, "variant": method.name, "ranks": COMM.size, "resolution": res,
                          "particles": n, "steps": sim.step_count, "error": primary, **errors, "seconds": seconds,
@@ -299,7 +299,7 @@ def accuracy(preset: str, out: str, problems=PROBLEMS, only: str = "") -> None:
                 continue
             for resolution in PRESETS[preset][problem]:
                 sim, seconds, error, res = maker(resolution, overrides)
-                n = sim.decomp.total
+                n = sim.state.decomp.total
                 rows.append({"problem": problem, "variant": variant, "ranks": COMM.size, "resolution": res,
                              "particles": n,
                              "steps": sim.step_count, "error": error, "seconds": seconds,
@@ -359,10 +359,10 @@ def stress(out: str, only: str = "") -> None:
     for name, scene, overrides, end in [c for c in cases + [spin] if only in c[0]]:
         sim = simulation(scene, overrides)
         if end is None:  # rigid spin: surface speed 0.3 c about the centre
-            omega = 0.3 * sim.bodies[0].constants.wave_speed / 0.5
-            rel = sim.X[: sim.n_owned] - 0.5
-            sim.u[:] = 0.0
-            sim.v[: sim.n_owned] = omega * np.stack([-rel[:, 1], rel[:, 0]], axis=1)
+            omega = 0.3 * sim.state.bodies[0].constants.wave_speed / 0.5
+            rel = sim.state.X[: sim.state.n_owned] - 0.5
+            sim.state.u[:] = 0.0
+            sim.state.v[: sim.state.n_owned] = omega * np.stack([-rel[:, 1], rel[:, 0]], axis=1)
             sim.compute_forces()
             end = 50 * 2 * np.pi / omega
         first = sim.diagnostics()

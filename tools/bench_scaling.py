@@ -53,9 +53,9 @@ def worker(side: int, steps: int) -> None:
     sim = Simulation(scene, local, comm)
     del local
     setup = time.perf_counter() - start
-    n = sim.n_owned
-    X = sim.X[:n]
-    sim.v[:n] = 1e-3 * np.sin(np.pi * X) * np.cos(np.pi * X[:, ::-1])
+    n = sim.state.n_owned
+    X = sim.state.X[:n]
+    sim.state.v[:n] = 1e-3 * np.sin(np.pi * X) * np.cos(np.pi * X[:, ::-1])
     for _ in range(3):
         sim.step()
     sim.stage_seconds.clear()

@@ -92,21 +92,21 @@ def measure(dim, particles, alpha, form, steps, eta=0.0, every=0, method="tlsph"
     scene = block(dim, particles, alpha, form, eta, every, method, law)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     rng = np.random.default_rng(0)
-    sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
+    sim.state.v[: sim.state.n_owned] = 1e-3 * rng.standard_normal(sim.state.v[: sim.state.n_owned].shape)
     for _ in range(5):
         sim.step()
     start = time.perf_counter()
     for _ in range(steps):
         sim.step()
     seconds = time.perf_counter() - start
-    n = sim.n_owned
+    n = sim.state.n_owned
     pairs = int(sim.topology.relations[0].ref.ptr[-1])
     update = sim.stage_seconds.get("reference update", 0.0) / max(sim.topology.count, 1)
-    if sim.contact:  # a contact search, timed alone
-        x = sim.X[:n] + sim.u[:n]
+    if sim.interactions.contact:  # a contact search, timed alone
+        x = sim.state.X[:n] + sim.state.u[:n]
         start = time.perf_counter()
         for _ in range(5):
-            sim.contact.search(x)
+            sim.interactions.contact.search(x)
         update = (time.perf_counter() - start) / 5
     return {"method": method + (f" + {law}" if law else ""), "dim": dim, "particles": n, "neighbours": pairs / max(n, 1), "alpha": alpha,
             "hourglass_form": form if alpha > 0 else "-", "eta": eta, "update_every": every,

@@ -44,11 +44,12 @@ for line in sys.stdin:
         except Exception as exc:  # the old version may not know the case
             print(json.dumps({"error": f"{type(exc).__name__}: {exc}"}), flush=True)
             continue
+        state = getattr(sim, "state", sim)  # before the rank's particles were a class of their own
         rng = np.random.default_rng(0)
-        sim.v[: sim.n_owned] = 1e-3 * rng.standard_normal(sim.v[: sim.n_owned].shape)
+        state.v[: state.n_owned] = 1e-3 * rng.standard_normal(state.v[: state.n_owned].shape)
         for _ in range(5):
             sim.step()
-        print(json.dumps({"particles": int(sim.n_owned)}), flush=True)
+        print(json.dumps({"particles": int(state.n_owned)}), flush=True)
     else:
         start = time.perf_counter()
         for _ in range(cmd["steps"]):

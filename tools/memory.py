@@ -37,7 +37,7 @@ def main() -> None:
     scene = config.load(path, args.set)
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
     sim.step()
-    n, rows, pairs = sim.n_owned, len(sim.X), sim.topology.pair_count()
+    n, rows, pairs = sim.state.n_owned, len(sim.state.X), sim.topology.pair_count()
     found = arrays_held(sim)
     table = {"particle": [], "pair": [], "other": []}
     for name, a in found:
@@ -46,7 +46,7 @@ def main() -> None:
             "particle" if first in (n, rows) or first == n + 1 else "other"
         table[kind].append((name, a))
     print(f"scene {args.scene}: {n} particles ({rows} with ghosts), {pairs} pairs "
-          f"({pairs / n:.1f} per particle), dimension {sim.dim}\n")
+          f"({pairs / n:.1f} per particle), dimension {sim.state.dim}\n")
     print("| field | kind | shape | dtype | bytes per particle | bytes per pair | MB |")
     print("|---|---|---|---|---|---|---|")
     totals = {}

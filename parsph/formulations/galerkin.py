@@ -233,19 +233,19 @@ class GalerkinFormulation:
         """The nodal pair data every particle has (nearest spacing for the time step, disorder)."""
         return PairOptions(corrected=True, hourglass_form=0, alpha=0.0)
 
-    def build(self, sim, body, kernel: str, search: bool = True) -> None:
+    def build(self, state, body, kernel: str, skin: float = 0.0, search: bool = True) -> None:
         """The relations and coefficients of `body` in the reference configuration: X (once,
         Lagrangian kernel) or the updated reference X^r (Eulerian kernel, at every step:
-        relations searched with the skin sim.topology.skin and kept, or with `search` False picked
+        relations searched with the skin skin and kept, or with `search` False picked
         from the kept ones); the row data of the ghost integration points is copied from
         their owners."""
-        P = sim.particles.arrays
-        n = sim.n_owned
+        P = state.particles.arrays
+        n = state.n_owned
         X, support, gid = P["Xr" if self.updated else "X"], P["support"], P["gid"]
-        mine = sim.body == body.index
+        mine = state.body == body.index
         group_rows = np.where(mine, 0, -1)
         group_cols = np.where(mine, 0, -2)
-        sets = [("particles", sim.particles)] + ([(self.points, sim.sets[self.points])] if self.points else [])
+        sets = [("particles", state.particles)] + ([(self.points, state.sets[self.points])] if self.points else [])
         self.couplings = []
         for name, points in sets:
             A = points.arrays
@@ -258,7 +258,7 @@ class GalerkinFormulation:
                 if not self.updated:
                     return find_relation(*args)
                 if search:
-                    self.kept[name, label] = KeptRelation(find_relation(*args, skin=sim.topology.skin), args[6])
+                    self.kept[name, label] = KeptRelation(find_relation(*args, skin=skin), args[6])
                 return self.kept[name, label].current(args[2], args[3], args[5])
             trial = related("trial", name, "particles", Y[: points.n_owned], X, gid, support, "cols",
                             np.where(active, 0, -1)[: points.n_owned], group_cols)
@@ -285,100 +285,100 @@ class GalerkinFormulation:
                 name, trial.ptr, trial.idx, G, phi, base, test.ptr, test.idx,
                 test_function_gradients(self.shape, test, X[:n], Y, A[key], support, kernel), integrates))
 
-    def moved(self, sim, body) -> np.ndarray:
+    def moved(self, state, body) -> np.ndarray:
         """Positions of the body's owned stress points in the current configuration: their
         updated reference moved by the Shepard interpolation of the particles' displacement
         since it, x_q = X^r_q + sum_J Phi_J(X^r_q) d_J (the Eulerian kernel's update)."""
         coupling = self.couplings[1]
         lo, hi = body.set_rows[coupling.points]
-        A = sim.sets[coupling.points].arrays
+        A = state.sets[coupling.points].arrays
         rows = np.repeat(np.arange(len(coupling.ptr) - 1), np.diff(coupling.ptr))
-        move = np.stack([np.bincount(rows, coupling.phi * sim.d[coupling.idx, a], len(coupling.ptr) - 1)
-                         for a in range(sim.dim)], axis=1)
+        move = np.stack([np.bincount(rows, coupling.phi * state.d[coupling.idx, a], len(coupling.ptr) - 1)
+                         for a in range(state.dim)], axis=1)
         return A["Xr"][lo:hi] + move[lo:hi]
 
-    def weights(self, sim, points: str) -> np.ndarray:
+    def weights(self, state, points: str) -> np.ndarray:
         """Quadrature weights of the integration points of set `points` (zeros: read-out only)."""
         if points != "particles":
-            return sim.sets[points].arrays["volume"]
+            return state.sets[points].arrays["volume"]
         if self.type == "kbm":
-            return sim.particles.arrays["weight"]
-        return sim.volume if self.points is None else np.zeros(len(sim.volume))
+            return state.particles.arrays["weight"]
+        return state.volume if self.points is None else np.zeros(len(state.volume))
 
     def stages(self, sim, body) -> list:
         c = body.constants.values
         runs = []
         for coupling in self.couplings:
             if coupling.points == "particles":
-                arrays = dict(fs=sim.fs if self.updated else sim.F, F=sim.F, Fr=sim.Fr if self.updated else sim.F,
-                              VP=sim.VP, J=sim.J, psi=sim.psi)
+                arrays = dict(fs=sim.state.fs if self.updated else sim.state.F, F=sim.state.F, Fr=sim.state.Fr if self.updated else sim.state.F,
+                              VP=sim.state.VP, J=sim.state.J, psi=sim.state.psi)
                 lo, hi = body.lo, body.hi
                 fail = (lambda i: stability.unstable_particle(sim, i))
             else:
-                A = sim.sets[coupling.points].arrays
+                A = sim.state.sets[coupling.points].arrays
                 arrays = A if self.updated else dict(A, fs=A["F"], Fr=A["F"])  # total-Lagrangian: F^r = I
                 lo, hi = body.set_rows[coupling.points]
                 fail = (lambda q, name=coupling.points: stability.unstable_point(sim, name, q))
-            runs.append((coupling, arrays, lo, hi, fail, self.weights(sim, coupling.points),
+            runs.append((coupling, arrays, lo, hi, fail, self.weights(sim.state, coupling.points),
                          coupling.points))
 
         def displacement():  # from the updated reference, d = u - (X^r - X)
-            np.subtract(sim.u[body.lo:body.hi], sim.shift[body.lo:body.hi], out=sim.d[body.lo:body.hi])
+            np.subtract(sim.state.u[body.lo:body.hi], sim.state.shift[body.lo:body.hi], out=sim.state.d[body.lo:body.hi])
 
-        scratch = (np.empty((sim.dim, sim.dim)), np.empty((update.WORK, 3, 3)))  # the kernel's
+        scratch = (np.empty((sim.state.dim, sim.state.dim)), np.empty((update.WORK, 3, 3)))  # the kernel's
 
         def kinematics_stress():
             for coupling, arrays, lo, hi, fail, weight, points in runs:
-                bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.d,
-                                             weight, c, *sim.material_state(body, points), arrays["fs"],
+                bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.state.d,
+                                             weight, c, *sim.state.material_state(body, points), arrays["fs"],
                                              arrays["F"], arrays["Fr"], arrays["VP"], arrays["J"], arrays["psi"],
                                              *scratch, sim.step_dt)
                 if bad >= 0:
                     raise fail(bad)
 
         def forces():
-            sim.f_int[body.lo:body.hi] = 0.0
+            sim.state.f_int[body.lo:body.hi] = 0.0
             for coupling, arrays, *_ in runs:
                 if coupling.integrates:
                     self.forces(body.lo, body.hi, coupling.test_ptr, coupling.test_idx, coupling.test_g,
-                                arrays["VP"], sim.f_int)
+                                arrays["VP"], sim.state.f_int)
 
         prefix = f"{self.points}." if self.points else ""
         written = ("fs", "F", "VP", "J", "psi") + tuple(prefix + k for k in ("F", "VP", "J", "psi") if prefix)
         reads = tuple(("VP",) if self.points is None or self.type == "kbm" else ()) + \
             ((prefix + "VP",) if prefix else ())
-        return [Stage("kinematics+stress", displacement, writes=("d",))] * sim.updated + [
+        return [Stage("kinematics+stress", displacement, writes=("d",))] * sim.state.updated + [
             Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
             Stage("forces", forces, reads=reads, writes=("f_int",), force_row=True)]
 
-    def quadrature(self, sim, body) -> list:
+    def quadrature(self, state, body) -> list:
         """[(X, F, w)] of the body's owned integration points, set by set."""
         out = []
         for coupling in self.couplings:
             if coupling.integrates:
-                weight = self.weights(sim, coupling.points)
+                weight = self.weights(state, coupling.points)
                 if coupling.points == "particles":
                     lo, hi = body.lo, body.hi
-                    out.append((sim.X[lo:hi], sim.F[lo:hi], weight[lo:hi]))
+                    out.append((state.X[lo:hi], state.F[lo:hi], weight[lo:hi]))
                 else:
                     lo, hi = body.set_rows[coupling.points]
-                    A = sim.sets[coupling.points].arrays
+                    A = state.sets[coupling.points].arrays
                     out.append((A["X"][lo:hi], A["F"][lo:hi], weight[lo:hi]))
         return out
 
-    def integrated(self, sim, body, density) -> np.ndarray:
+    def integrated(self, state, body, density) -> np.ndarray:
         """w_q q_q over the body's owned integration points, q = density(arrays) per row of
         a point set's arrays (a density per unit reference volume: psi, plastic work)."""
         terms = []
         for coupling in self.couplings:
             if not coupling.integrates:
                 continue
-            weight = self.weights(sim, coupling.points)
+            weight = self.weights(state, coupling.points)
             if coupling.points == "particles":
                 lo, hi = body.lo, body.hi
             else:
                 lo, hi = body.set_rows[coupling.points]
-            terms.append(weight[lo:hi] * density(sim.point_set(coupling.points).arrays)[lo:hi])
+            terms.append(weight[lo:hi] * density(state.point_set(coupling.points).arrays)[lo:hi])
         return np.concatenate(terms)
 
 

@@ -112,7 +112,7 @@ class NodalFormulation:
         """Whether a formulation table moves its reference (ulsph, the Eulerian kernel)."""
         return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
 
-    def build(self, sim, body, kernel: str, search: bool = True) -> None:
+    def build(self, state, body, kernel: str, skin: float = 0.0, search: bool = True) -> None:
         """Its relations: the particle pairs, which its kernel relation holds (parsph.kernel_relation)."""
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
@@ -141,28 +141,28 @@ class NodalFormulation:
         return PairOptions(corrected=self.type != "sph", hourglass_form=self.hourglass_form, alpha=self.alpha,
                            stabilised=self.eta > 0)
 
-    def quadrature(self, sim, body) -> list:
+    def quadrature(self, state, body) -> list:
         """[(X, F, w)] of the body's owned integration points: its particles, their volumes."""
         lo, hi = body.lo, body.hi
-        return [(sim.X[lo:hi], sim.F[lo:hi], sim.volume[lo:hi])]
+        return [(state.X[lo:hi], state.F[lo:hi], state.volume[lo:hi])]
 
-    def integrated(self, sim, body, density) -> np.ndarray:
+    def integrated(self, state, body, density) -> np.ndarray:
         """V^0 q over the body's owned particles, q = density(arrays) per row of the
         particles' arrays (a density per unit reference volume: psi, plastic work)."""
-        return sim.volume[body.lo:body.hi] * density(sim.particles.arrays)[body.lo:body.hi]
+        return state.volume[body.lo:body.hi] * density(state.particles.arrays)[body.lo:body.hi]
 
     def stages(self, sim, body) -> list:
         """The passes of one force evaluation over `body`'s owned particles of `sim`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
-        dim = sim.dim  # the kernels' scratch (they run without Numba's reference counting)
+        dim = sim.state.dim  # the kernels' scratch (they run without Numba's reference counting)
         scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
         force_scratch = (np.empty(dim), np.empty(6), np.empty((3, 3)))
         out = []
-        fs = sim.fs if self.updated else sim.F  # the motion from the reference: F itself in the initial one
-        if sim.updated:  # d apart from u: the displacement since each body's reference
+        fs = sim.state.fs if self.updated else sim.state.F  # the motion from the reference: F itself in the initial one
+        if sim.state.updated:  # d apart from u: the displacement since each body's reference
             def displacement():
                 lo, hi = body.lo, body.hi
-                np.subtract(sim.u[lo:hi], sim.shift[lo:hi], out=sim.d[lo:hi])
+                np.subtract(sim.state.u[lo:hi], sim.state.shift[lo:hi], out=sim.state.d[lo:hi])
             out.append(Stage("kinematics+stress", displacement, writes=("d",)))
         plastic = self.plastic_hourglass == "yield_stress" and body.law.plastic is not None
         viscous = self.plastic_hourglass == "viscous" and hourglass and body.law.plastic is not None
@@ -171,34 +171,34 @@ class NodalFormulation:
                 lo, hi = body.lo, body.hi
                 modulus = np.full(hi - lo, body.constants.youngs)
                 if plastic:  # a yielded point's yield stress in place of E
-                    state = sim.material_state(body)[0][lo:hi]
+                    state = sim.state.material_state(body)[0][lo:hi]
                     modulus = np.where(state[:, body.law.plastic.strain] > 0.0,
                                        body.law.plastic.yield_stress(body.constants.values, state), modulus)
                 if body.failure:
-                    modulus *= damage.hourglass_factor(sim.damage_state(body)[0][lo:hi])
+                    modulus *= damage.hourglass_factor(sim.state.damage_state(body)[0][lo:hi])
                 if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
                     # the penalty E_i sum_j c_ij |e_ij|^2 / 2 of the last evaluation drops with the
                     # modulus without work: counted as released (as at reference updates)
-                    old = sim.youngs[lo:hi]
+                    old = sim.state.youngs[lo:hi]
                     changed = (modulus != old) & (old > 0.0)  # a penalty at E = 0 is 0
                     if changed.any():
                         ratio = modulus / np.where(changed, old, 1.0)
-                        drop = np.where(changed, sim.hg_psi[lo:hi] * (1.0 - ratio), 0.0)
+                        drop = np.where(changed, sim.state.hg_psi[lo:hi] * (1.0 - ratio), 0.0)
                         sim.ledger.totals["hourglass_released"][body.index].add(drop)
-                sim.youngs[lo:hi] = modulus
+                sim.state.youngs[lo:hi] = modulus
             out.append(Stage("kinematics+stress", hourglass_modulus, writes=("youngs",)))
         if hessian:
             def gradient():
                 ref = body.relation.ref
-                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, sim.d, sim.f)
+                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, sim.state.d, sim.state.f)
             out.append(Stage("kinematics+stress", gradient, reads=("d",), writes=("f",)))
 
         def kinematics_stress():
             ref = body.relation.ref
             bad = self.kinematics_stress(
-                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.d, sim.volume,
-                sim.youngs, body.constants.values, *sim.material_state(body), *sim.damage_state(body), sim.f,
-                fs, sim.F, sim.Fr if self.updated else sim.F, sim.VP, sim.J, sim.psi, sim.hg_psi, *scratch, sim.step_dt)
+                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.state.d, sim.state.volume,
+                sim.state.youngs, body.constants.values, *sim.state.material_state(body), *sim.state.damage_state(body), sim.state.f,
+                fs, sim.state.F, sim.state.Fr if self.updated else sim.state.F, sim.state.VP, sim.state.J, sim.state.psi, sim.state.hg_psi, *scratch, sim.step_dt)
             if bad >= 0:
                 raise stability.unstable_particle(sim, bad)
         states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
@@ -209,7 +209,7 @@ class NodalFormulation:
         if hessian:
             def hessian_transpose():
                 ref = body.relation.ref
-                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.VP, sim.B)
+                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.state.VP, sim.state.B)
             out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",), force_row=True))
 
         # MACHDYN's viscous hourglass force: alpha, the wave speed, density, E, the plastic strain's column
@@ -220,10 +220,10 @@ class NodalFormulation:
         def forces():
             ref = body.relation.ref
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
-                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.d, fs, sim.VP, sim.B, sim.youngs,
-                        sim.volume, sim.mass, sim.f_int, sim.f_hg, sim.stable.bound_hourglass, sim.omega_hg2,
-                        *force_scratch, sim.v, sim.material_state(body)[1] if viscous else sim.no_state,
-                        sim.support, kind, constants)
+                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.state.d, fs, sim.state.VP, sim.state.B, sim.state.youngs,
+                        sim.state.volume, sim.state.mass, sim.state.f_int, sim.state.f_hg, sim.stable.bound_hourglass, sim.state.omega_hg2,
+                        *force_scratch, sim.state.v, sim.state.material_state(body)[1] if viscous else sim.state.no_state,
+                        sim.state.support, kind, constants)
         reads = ("VP",) + (("d", "fs" if self.updated else "F", "youngs") if hourglass else ()) + \
             (("B",) if hessian else ()) + \
             (("v", body.law.state + "_trial") if viscous else ())
@@ -233,9 +233,9 @@ class NodalFormulation:
             def viscosity():
                 ref = body.relation.ref
                 tlsph.artificial_viscosity(
-                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.d, sim.v, sim.J,
-                    body.density, sim.volume_r if self.updated else sim.volume, sim.mass, sim.support,
-                    body.constants.wave_speed, *self.viscosity, sim.f_visc, sim.viscous_heating, sim.step_limit)
+                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.state.d, sim.state.v, sim.state.J,
+                    body.density, sim.state.volume_r if self.updated else sim.state.volume, sim.state.mass, sim.state.support,
+                    body.constants.wave_speed, *self.viscosity, sim.state.f_visc, sim.state.viscous_heating, sim.state.step_limit)
             out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc", "viscous_heating", "step_limit"),
                              force_row=True))
         return out

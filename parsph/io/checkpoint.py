@@ -32,7 +32,7 @@ import re
 import h5py
 import numpy as np
 
-from parsph import config, interactions, readouts
+from parsph import config, readouts
 from parsph.errors import InputError, ParsphError
 from parsph.io.h5 import ParticleFile
 from parsph.io.output_dir import ensure_space
@@ -118,11 +118,11 @@ def state_of(sim) -> dict:
     owned particles (with the updated reference, if any); the accumulated totals over all
     ranks, exact (exact_sum.Exact.to_json), and the last step's obstacle forces."""
     return {
-        "fields": sim.particles.checkpointed(), "group_names": sim.group_names,
-        "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in sim.point_sets()[1:]},
+        "fields": sim.state.particles.checkpointed(), "group_names": sim.state.group_names,
+        "sets": {p.name: (p.gid[: p.n_owned], p.total, p.checkpointed()) for p in sim.state.point_sets()[1:]},
         "totals": {**sim.ledger.checkpoint(sim.comm), "wall_force": readouts.wall_forces(sim).tolist(),
                    "surface_torque": readouts.surface_torques(sim).tolist(),
-                   "rigid": [body.state() for body in sim.rigid_bodies], **interactions.checkpoint(sim.interactions)},
+                   "rigid": [body.state() for body in sim.conditions.rigid_bodies], **sim.interactions.checkpoint()},
         "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
                   **sim.topology.clock(), "first_stable": sim.stable.first},
     }
@@ -141,7 +141,7 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene_json: str, keep: 
     name = f"step_{sim.step_count:08d}.h5"
     final = os.path.join(folder, name)
     tmp = os.path.join(folder, f".{name}.tmp")
-    gid = sim.gid[:sim.n_owned]
+    gid = sim.state.gid[:sim.state.n_owned]
     state = state_of(sim)
     fields = state["fields"]
     with collective():
@@ -155,7 +155,7 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene_json: str, keep: 
         with collective():
             with ParticleFile(tmp, "w", comm, userblock_size=USERBLOCK) as out:
                 for field, rows in fields.items():
-                    out.write_rows(field, gid, rows, sim.decomp.total)
+                    out.write_rows(field, gid, rows, sim.state.decomp.total)
                 for name, (set_gid, set_total, set_fields) in sets.items():
                     for field, rows in set_fields.items():
                         out.write_rows(f"{name}/{field}", set_gid, rows, set_total)
@@ -172,12 +172,12 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene_json: str, keep: 
                     attrs["fields"] = json.dumps(list(fields))
                     attrs["totals"] = json.dumps(state["totals"])
                     attrs["schedules"] = json.dumps(schedules)
-                    attrs["particles"] = sim.decomp.total
+                    attrs["particles"] = sim.state.decomp.total
                     if sets:  # the other point sets: name -> (points, fields)
                         attrs["sets"] = json.dumps({name: [int(total), list(f)] for name, (_, total, f)
                                                     in sets.items()})
-                    if len(sim.offsets) > 2:  # the first global id of each body
-                        attrs["bodies"] = json.dumps(sim.offsets.tolist())
+                    if len(sim.state.offsets) > 2:  # the first global id of each body
+                        attrs["bodies"] = json.dumps(sim.state.offsets.tolist())
         try:
             digest = file_digest(tmp, comm)
         except ValueError as exc:

@@ -161,9 +161,9 @@ def balance_check(sim, settings, symmetry: tuple, restored: dict | None) -> Bala
     """The run's balance check (parsph.balance_check, with the scene's [balance] `settings`)
     of `sim`: its total mass, the axes no `symmetry` plane is normal to, and whether its
     formulations conserve momentum (collective)."""
-    mass = float(allsum(sim.comm, [total(sim.mass[: sim.n_owned])])[0])
+    mass = float(allsum(sim.comm, [total(sim.state.mass[: sim.state.n_owned])])[0])
     planes = {plane.axis for plane in symmetry}
-    free = [a for a in range(sim.dim) if a not in planes]
-    momentum = all(b.formulation.conserves_momentum for b in sim.bodies)
-    energy = all(b.formulation.conserves_energy for b in sim.bodies)
-    return BalanceCheck(settings, sim.dim, mass, free, momentum, energy, restored)
+    free = [a for a in range(sim.state.dim) if a not in planes]
+    momentum = all(b.formulation.conserves_momentum for b in sim.state.bodies)
+    energy = all(b.formulation.conserves_energy for b in sim.state.bodies)
+    return BalanceCheck(settings, sim.state.dim, mass, free, momentum, energy, restored)

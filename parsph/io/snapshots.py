@@ -117,17 +117,17 @@ class SnapshotWriter:
 
     def estimate_bytes(self, sim, fields: list) -> int:
         """Bytes one snapshot of `fields` adds to the file (data and HDF5 metadata)."""
-        per_particle = sum(quantities.bytes_per_point(name, sim.dim) for name in fields) + 8
-        first = 0 if self.times else 8 * sim.decomp.total  # the connectivity
-        return sim.decomp.total * per_particle + first + 1024 * (len(fields) + 2)
+        per_particle = sum(quantities.bytes_per_point(name, sim.state.dim) for name in fields) + 8
+        first = 0 if self.times else 8 * sim.state.decomp.total  # the connectivity
+        return sim.state.decomp.total * per_particle + first + 1024 * (len(fields) + 2)
 
     def write(self, sim, fields: list) -> None:
         """Collective: one snapshot of the owned particles' `fields`; a value that is not
         finite stops the run before anything of the snapshot is written, naming the field,
         the particle and the step."""
-        n = sim.n_owned
-        gid = sim.gid[:n]
-        total = sim.decomp.total
+        n = sim.state.n_owned
+        gid = sim.state.gid[:n]
+        total = sim.state.decomp.total
         group = f"step_{sim.step_count:08d}"
         first = not self.times
         with collective(self.comm):

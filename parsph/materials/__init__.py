@@ -59,10 +59,10 @@ def check_failure(path: str, material: dict) -> None:
 def _damage(sim, sel):
     """The committed damage D at the owned particles `sel` (0 without damage)."""
     out = np.zeros(len(sel))
-    for b in sim.bodies:
+    for b in sim.state.bodies:
         if b.failure:
-            rows = np.flatnonzero(sim.body[sel] == b.index)
-            out[rows] = sim.damage_state(b)[0][sel[rows], damage.DAMAGE]
+            rows = np.flatnonzero(sim.state.body[sel] == b.index)
+            out[rows] = sim.state.damage_state(b)[0][sel[rows], damage.DAMAGE]
     return out
 
 
@@ -71,10 +71,10 @@ def _failure_index(sim, sel):
     largest principal strain over failure_strain; 1 is where a point fails or its damage
     grows (0 without a failure model)."""
     out = np.zeros(len(sel))
-    for b in sim.bodies:
+    for b in sim.state.bodies:
         if b.failure:
-            rows = np.flatnonzero(sim.body[sel] == b.index)
-            out[rows] = FAILURES[b.failure].index(sim.damage_state(b)[0][sel[rows]], b)
+            rows = np.flatnonzero(sim.state.body[sel] == b.index)
+            out[rows] = FAILURES[b.failure].index(sim.state.damage_state(b)[0][sel[rows]], b)
     return out
 
 
@@ -82,11 +82,11 @@ def law_readout(sim, sel: np.ndarray, name: str) -> np.ndarray:
     """The material laws' read-out `name` (materials.law.Readout) of their last stress
     evaluation's state at the owned particles `sel` (0 for the laws without it)."""
     out = np.zeros(len(sel))
-    for b in sim.bodies:
+    for b in sim.state.bodies:
         readout = b.law.readouts.get(name)
         if readout is not None:
-            rows = np.flatnonzero(sim.body[sel] == b.index)
-            out[rows] = readout.compute(b.constants.values, sim.material_state(b)[1][sel[rows]])
+            rows = np.flatnonzero(sim.state.body[sel] == b.index)
+            out[rows] = readout.compute(b.constants.values, sim.state.material_state(b)[1][sel[rows]])
     return out
 
 

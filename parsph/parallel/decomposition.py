@@ -1,4 +1,4 @@
-"""Ownership, migration of particles with their state, and the ghost (halo) exchange.
+"""Ownership, migration of particles with their state, and the particles' ghost layers.
 
 Particles are owned by position: recursive coordinate bisection (RCB) of the reference
 positions balances the counts and keeps subdomains compact. The bisection runs in parallel
@@ -12,6 +12,7 @@ A rank's local arrays are ordered: owned particles (by global id), then layer-1 
 (neighbours of layer-1 ghosts, needed only to build the ghosts' corrected gradients, by
 global id). `add_ghosts` finds both layers across ranks from the subdomains' bounding
 boxes; `Decomposition.refresh(arrays...)` copies the owners' values into the layer-1 slots.
+Both go through the halo machinery of parallel.halo, which contact's ghosts use too.
 
 At start-up each rank generates (parsph.build) or reads (parsph.io.checkpoint) a contiguous
 block of the particle set and `partition` sends every particle to its owner: no rank ever
@@ -26,6 +27,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parsph.cells import kdtree
+from parsph.parallel.halo import Halo, gather, requested, within_reach
 
 
 def _smallest(c: np.ndarray, ids: np.ndarray, target: int, comm) -> np.ndarray:
@@ -149,20 +151,7 @@ def nearby(fields: dict, x: np.ndarray, reach: float, comm, region: np.ndarray |
     """The points of other ranks (all arrays of `fields`, plus "owner") within `reach` of
     this rank's bounding box of the positions `region` (default `x`, the positions of the
     rows of `fields`)."""
-    n = len(x)
-    region = x if region is None else region
-    boxes = comm.allgather((region.min(axis=0), region.max(axis=0)) if len(region) else None)
-    out = []
-    for r, box in enumerate(boxes):
-        if r == comm.rank or box is None or n == 0:
-            out.append(None)
-            continue
-        gap = np.maximum(0.0, np.maximum(box[0] - x, x - box[1]))
-        sel = np.flatnonzero(np.einsum("na,na->n", gap, gap) <= reach ** 2)
-        chunk = _take(fields, sel)
-        chunk["owner"] = np.full(len(sel), comm.rank, np.int64)
-        out.append(chunk)
-    return _concat(comm.alltoall(out), dict(fields, owner=np.zeros(0, np.int64)))
+    return gather(fields, within_reach(x, reach, comm, region), comm)
 
 
 @dataclass
@@ -261,38 +250,18 @@ class Decomposition:
         ghosts' rows between neighbour searches)."""
         self.comm = comm
         self.mirrors = mirrors
-        size, me = comm.size, comm.rank
         self.n_owned = local.n_owned
         self.n_ghost = local.n_ghost
         self.n_rows = self.n_owned + self.n_ghost  # particles whose neighbourhood is complete
         self.total = local.total
         self.local_gid = local.gid
         owned = local.gid[: self.n_owned]
-        owner1 = local.owner[self.n_owned: self.n_rows]
-        layer1 = local.gid[self.n_owned: self.n_rows][owner1 >= 0]
-        owner1 = owner1[owner1 >= 0]
-        # receive plan: contiguous ghost block per owner rank
-        self.recv_slices = {}
-        start = self.n_owned
-        for r in np.unique(owner1):
-            count = int(np.sum(owner1 == r))
-            self.recv_slices[int(r)] = slice(start, start + count)
-            start += count
-        # send plan: each owner learns which of its particles every other rank needs
-        self.send_index = {}
-        if size > 1:
-            wanted = comm.alltoall([layer1[owner1 == r] for r in range(size)])
-            self.send_index = {r: np.searchsorted(owned, gids) for r, gids in enumerate(wanted)
-                               if len(gids) and r != me}
-        self.recv_rows2, self.send_index2 = {}, {}  # layer 2: rows by owner (in gid order)
-        if layer2 and size > 1:
-            owner2 = local.owner[self.n_rows:]
-            gid2 = local.gid[self.n_rows:]
-            self.recv_rows2 = {int(r): self.n_rows + np.flatnonzero(owner2 == r) for r in np.unique(owner2)
-                               if r >= 0}  # not the mirror images
-            wanted = comm.alltoall([gid2[owner2 == r] for r in range(size)])
-            self.send_index2 = {r: np.searchsorted(owned, gids) for r, gids in enumerate(wanted)
-                                if len(gids) and r != me}
+        owner1, gid1 = local.owner[self.n_owned: self.n_rows], local.gid[self.n_owned: self.n_rows]
+        self.halo = Halo(comm, requested(owned, gid1, owner1, comm), owner1, self.n_owned)  # layer 1
+        self.halo2 = Halo(comm, {}, np.zeros(0, np.int64), self.n_rows)  # layer 2, kept with `layer2`
+        if layer2:
+            owner2, gid2 = local.owner[self.n_rows:], local.gid[self.n_rows:]
+            self.halo2 = Halo(comm, requested(owned, gid2, owner2, comm), owner2, self.n_rows)
 
     def trim(self) -> None:
         """Forget layer-2 ghosts once reference data is built."""
@@ -303,7 +272,7 @@ class Decomposition:
         then the reflected values of the mirror images' sources into theirs (copied as they
         are where `copied` says so, per array)."""
         for k, arr in enumerate(arrays):
-            self._exchange(arr)
+            self.halo.exchange(arr)
             if self.mirrors is not None:
                 self.mirrors.fill(arr, reflected=not (k < len(copied) and copied[k]))
 
@@ -312,32 +281,7 @@ class Decomposition:
         mirror images of both layers, reflected as the registered `fields` (parsph.fields,
         one per array) say, or copied (no `fields`: material states)."""
         for k, arr in enumerate(arrays):
-            self._exchange(arr)
-            self._exchange(arr, self.recv_rows2, self.send_index2)
+            self.halo.exchange(arr)
+            self.halo2.exchange(arr)
             if self.mirrors is not None:
                 self.mirrors.fill_all(arr, fields[k] if fields else None)
-
-    def _exchange(self, arr: np.ndarray, recv=None, send=None) -> None:
-        """Copy owners' values of `arr` into the ghost slots (MPI): layer 1, or the rows of
-        the plan (recv: rank -> rows, send: rank -> owned rows)."""
-        recv = self.recv_slices if recv is None else recv
-        send = self.send_index if send is None else send
-        if not recv and not send:
-            return
-        requests = []
-        buffers = []
-        for r, rows in recv.items():
-            if isinstance(rows, slice) and arr.flags.c_contiguous:  # received in place
-                requests.append(self.comm.Irecv(arr[rows], source=r, tag=7))
-                continue
-            buf = np.empty((len(rows),) + arr.shape[1:], arr.dtype)
-            buffers.append((rows, buf))
-            requests.append(self.comm.Irecv(buf, source=r, tag=7))
-        sends = []
-        for r, index in send.items():
-            data = np.ascontiguousarray(arr[index])
-            sends.append(data)
-            requests.append(self.comm.Isend(data, dest=r, tag=7))
-        MPI.Request.Waitall(requests)
-        for rows, buf in buffers:
-            arr[rows] = buf

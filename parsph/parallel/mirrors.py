@@ -21,8 +21,9 @@ energy balance (parsph.ledger), as the particles of the whole body would.
 Neighbour lists kept between searches (ulsph, the Eulerian kernel: relations.Skin) get
 images within the reaches plus the skin, as their ghosts do, and between searches every
 image row of both layers is set from its source again (Mirrors.fill_all): the rows a
-search would make. Contact makes its own images of the contact particles near a plane
-(parsph.contact), with the same global ids.
+search would make. Contact images its own points (the contact particles near a plane, in
+the current configuration: parsph.contact) by the same enumeration (plane_images), with the
+same global ids, and refreshes them as a one-layer Mirrors.
 """
 
 from __future__ import annotations
@@ -53,6 +54,13 @@ class Mirrors:
     sign2: np.ndarray  # sign and offset of the layer-2 images
     offset2: np.ndarray
     share: np.ndarray | None = None  # each owned particle's share of itself in the part modelled (on_planes)
+
+    @classmethod
+    def one_layer(cls, start: int, source: np.ndarray, sign: np.ndarray, offset: np.ndarray) -> Mirrors:
+        """Images in one layer, rows `start`, start + 1, ... (plane_images' sources, sign and
+        offset): contact's."""
+        none = np.zeros((0, sign.shape[1]))
+        return cls(start, source, sign, start + len(source), np.zeros(0, np.int64), offset, none, none)
 
     def copy_all(self, arr: np.ndarray) -> None:
         """Set the image rows of both layers of `arr` (a field reflection leaves as it is:
@@ -114,28 +122,12 @@ def add_images(local: LocalBody, position: str, planes: list, comm,
         return local, None
     fields, n, n1 = local.fields, local.n_owned, local.n_owned + local.n_ghost
     x = fields[position]
-    dim = x.shape[1]
     support = comm.allreduce(float(fields["support"][:n].max()) if n else 0.0, op=MPI.MAX)
     tol = 1e-9 * support
     reach = support + skin
     sides = body_sides(x[:n], planes, tol, comm)
-    plane_at = np.zeros(dim)  # a point on every plane
-    for p in planes:
-        plane_at[p["axis"]] = p["position"]
-    source, sign, gid = [], [], []
-    for k, subset in enumerate(_subsets(len(planes)), start=1):
-        near = np.ones(len(x), bool)
-        flip = np.ones(dim)
-        for p in subset:
-            gap = sides[p] * (x[:, planes[p]["axis"]] - planes[p]["position"])
-            near &= (gap > tol) & (gap < 2.0 * reach)  # layer-2 images lie within two supports
-            flip[planes[p]["axis"]] = -1.0
-        rows = np.flatnonzero(near)
-        source.append(rows)
-        sign.append(np.broadcast_to(flip, (len(rows), dim)))
-        gid.append(fields["gid"][rows] + k * local.total)
-    source, sign, gid = np.concatenate(source), np.concatenate(sign), np.concatenate(gid)
-    offset = (1.0 - sign) * plane_at  # a point p reflects to sign * p + offset
+    source, sign, offset, gid = plane_images(x, fields["gid"], planes, local.total,
+                                             2.0 * reach, tol, sides)  # layer-2 images lie within two supports
     image_x = sign * x[source] + offset
     layer1 = layer2 = np.zeros(0, np.int64)
     if n and len(source):
@@ -167,6 +159,35 @@ def add_images(local: LocalBody, position: str, planes: list, comm,
     source2 = np.where(source[layer2] < n1, source[layer2], source[layer2] + len(layer1))  # rows once merged
     return body, Mirrors(n1, source[layer1], np.ascontiguousarray(sign[layer1]), len(x) + len(layer1), source2,
                          offset[layer1], sign[layer2], offset[layer2], on_planes(x[:n], planes, tol))
+
+
+def plane_images(x: np.ndarray, gid: np.ndarray, planes: list, total: int, reach: float, tol: float,
+                 sides: list | None = None) -> tuple:
+    """The mirror images of the points at `x` (global ids `gid`) across each combination of
+    the `planes` (_subsets): for each, the points farther than `tol` and nearer than `reach`
+    from each of its planes, on the side of it `sides` gives (+1 or -1 per plane; None:
+    either side). Returns their source rows, reflections (sign, offset: a point p reflects to
+    sign * p + offset) and global ids (the source's plus k times `total`, k the combination's
+    place in _subsets, from 1)."""
+    dim = x.shape[1]
+    plane_at = np.zeros(dim)  # a point on every plane
+    for p in planes:
+        plane_at[p["axis"]] = p["position"]
+    source, sign, ids = [], [], []
+    for k, subset in enumerate(_subsets(len(planes)), start=1):
+        near = np.ones(len(x), bool)
+        flip = np.ones(dim)
+        for p in subset:
+            gap = x[:, planes[p]["axis"]] - planes[p]["position"]
+            gap = np.abs(gap) if sides is None else sides[p] * gap
+            near &= (gap > tol) & (gap < reach)
+            flip[planes[p]["axis"]] = -1.0
+        rows = np.flatnonzero(near)
+        source.append(rows)
+        sign.append(np.broadcast_to(flip, (len(rows), dim)))
+        ids.append(gid[rows] + k * total)
+    source, sign = np.concatenate(source), np.concatenate(sign)
+    return source, sign, (1.0 - sign) * plane_at, np.concatenate(ids)
 
 
 def on_planes(x: np.ndarray, planes: list, tol: float) -> np.ndarray | None:

@@ -29,7 +29,7 @@ CASES = {
 comm = MPI.COMM_WORLD
 for name, overrides in CASES.items():
     sim = simulation("cantilever", ["time.end=1e-3", *overrides], comm)
-    ghosts = comm.allreduce(sum(p.decomp.n_rows - p.n_owned for p in sim.point_sets()))
+    ghosts = comm.allreduce(sum(p.decomp.n_rows - p.n_owned for p in sim.state.point_sets()))
     for _ in range(20):
         sim.step()
     sim.compute_forces()

@@ -40,14 +40,14 @@ end = 1.0
 def rows(sim):
     """gid -> (sorted neighbour gids, g, g_rev) for the owned particles."""
     out = {}
-    for i in range(sim.n_owned):
+    for i in range(sim.state.n_owned):
         p = slice(sim.topology.relations[0].ref.ptr[i], sim.topology.relations[0].ref.ptr[i + 1])
-        out[int(sim.gid[i])] = (sim.gid[sim.topology.relations[0].ref.idx[p]], sim.topology.relations[0].ref.g[p], sim.topology.relations[0].ref.g_rev[p])
+        out[int(sim.state.gid[i])] = (sim.state.gid[sim.topology.relations[0].ref.idx[p]], sim.topology.relations[0].ref.g[p], sim.topology.relations[0].ref.g_rev[p])
     return out
 
 
 sim = simulation(scene, comm=comm)
-owner = {int(g): comm.rank for g in sim.gid[: sim.n_owned]}
+owner = {int(g): comm.rank for g in sim.state.gid[: sim.state.n_owned]}
 gathered = comm.gather((rows(sim), owner), root=0)
 status = 0
 if comm.rank == 0:
