@@ -161,7 +161,7 @@ def _neighbour_support(x: np.ndarray, target: int, comm) -> np.ndarray:
         reach *= 2.0
 
 
-def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> dict:
+def _body_particles(scene: config.Scene, body: dict, where: str, gens: list, comm) -> dict:
     """This rank's owned particles of one body (its parts united): "gid" numbered densely
     from 0, "X", "measure", "volume", "mass", "support"."""
     dim = scene.scene.dimension
@@ -223,7 +223,7 @@ def _mesh_set(spec: dict, owned: dict, meshes: list) -> np.ndarray:
     return ~mask if invert else mask
 
 
-def build_integration_points(scene: dict, comm) -> dict:
+def build_integration_points(scene: config.Scene, comm) -> dict:
     """This rank's blocks of the point sets of integration points the scene's bodies need
     (formulations.galerkin: stress points, Gauss points; global ids body after body):
     "gid", "X", "volume" (quadrature weight), "body". Collective."""
@@ -244,7 +244,7 @@ def build_integration_points(scene: dict, comm) -> dict:
     return out
 
 
-def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
+def build_bodies(scene: config.Scene, comm) -> tuple[dict, np.ndarray]:
     """This rank's owned particles of `scene` (arrays by global id: "gid", "X", "measure",
     "volume", "mass", "support", "groups" as uint8 columns by sorted group name), and the
     first global id of each body (with the total at the end): bodies are numbered one
@@ -300,12 +300,12 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
     return owned, np.array(offsets, np.int64)
 
 
-def build_particles(scene: dict, comm) -> dict:
+def build_particles(scene: config.Scene, comm) -> dict:
     """This rank's owned particles of `scene` (build_bodies without the body offsets)."""
     return build_bodies(scene, comm)[0]
 
 
-def build_local(scene: dict, comm) -> LocalBody:
+def build_local(scene: config.Scene, comm) -> LocalBody:
     """This rank's particles of `scene` with their ghost layers (and the other point sets,
     if any), ready for the simulation."""
     owned, offsets = build_bodies(scene, comm)

@@ -20,7 +20,7 @@ class Conditions:
     (`loads.body_acceleration`), mass-proportional damping (`time.damping`) and free rigid
     bodies on a rank's particles."""
 
-    def __init__(self, scene: dict):
+    def __init__(self, scene: config.Scene):
         self.scene = scene
         body_acc = scene.loads.body_acceleration
         self.body_acc = None if body_acc is None else np.asarray(body_acc)

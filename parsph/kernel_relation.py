@@ -48,7 +48,7 @@ class KernelRelation:
     with lists `skin` wider (the Skin rule of `length` beyond the reach) and otherwise rebuilt
     on the kept lists. `count`: its reference updates so far, `since`: steps since the last."""
 
-    def __init__(self, index: int, bodies: list, scene_bodies: list, scene: dict, length: float, comm):
+    def __init__(self, index: int, bodies: list, scene_bodies: list, scene: config.Scene, length: float, comm):
         self.index, self.bodies = index, bodies
         specs = scene.bodies
         self.kernel = config.kernel_of(scene, specs[bodies[0].index]).type
@@ -107,7 +107,7 @@ class KernelRelation:
         return np.concatenate(rows)
 
 
-def groups(bodies: list, scene: dict) -> list:
+def groups(bodies: list, scene: config.Scene) -> list:
     """The bodies in as few groups as they go (in body order, each body in the first group it
     fits): one kernel type; one eta and hessian_correction among the stabilised bodies; one
     update schedule and list rule among the bodies whose reference moves."""

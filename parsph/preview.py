@@ -82,7 +82,7 @@ def _group_field(name: str) -> str:
     return "group_" + name.replace("/", "_")  # a dataset's name: no "/"
 
 
-def _fields(scene: dict, owned: dict, offsets: np.ndarray) -> dict:
+def _fields(scene: config.Scene, owned: dict, offsets: np.ndarray) -> dict:
     """This rank's rows of the preview's fields (positions padded to 3D)."""
     X = owned["X"]
     values = {"position": np.pad(X, ((0, 0), (0, 3 - X.shape[1]))),
@@ -95,7 +95,7 @@ def _fields(scene: dict, owned: dict, offsets: np.ndarray) -> dict:
     return values
 
 
-def _write_particles(out_dir: str, scene: dict, gid: np.ndarray, total: int, values: dict) -> None:
+def _write_particles(out_dir: str, scene: config.Scene, gid: np.ndarray, total: int, values: dict) -> None:
     """Collective: particles.h5 (a snapshot file of one snapshot) and its index particles.xdmf."""
     path = os.path.join(out_dir, "particles.h5")
     with collective():
@@ -113,7 +113,7 @@ def _write_particles(out_dir: str, scene: dict, gid: np.ndarray, total: int, val
                          + point_grid("particles.h5", GROUP, total, fields) + "</Domain>\n</Xdmf>\n")
 
 
-def obstacle_surfaces(scene: dict, X: np.ndarray, t: float = 0.0) -> list:
+def obstacle_surfaces(scene: config.Scene, X: np.ndarray, t: float = 0.0) -> list:
     """[(name, triangles (m, 3, 3))] of the scene's obstacles at time t on rank 0 ([] on
     the others, and in 1D). An obstacle object that has a method triangles(t),
     returning its surface's triangles (m, 3, dimension) at time t, gives its own; a wall
@@ -210,7 +210,7 @@ def _write_obstacles(path: str, surfaces: list) -> None:
     meshio.write(path, meshio.Mesh(points, [("triangle", cells)], cell_data={"obstacle": [index]}))
 
 
-def _plot(out_dir: str, scene: dict) -> str | None:
+def _plot(out_dir: str, scene: config.Scene) -> str | None:
     """particles.png: the particles coloured by body (in 1D their volumes along x; rank 0;
     None without matplotlib)."""
     from parsph.io.plots import plot_snapshots
@@ -227,7 +227,7 @@ def _plot(out_dir: str, scene: dict) -> str | None:
     return os.path.join(out_dir, "particles.png")
 
 
-def _summary(scene: dict, out_dir: str, owned: dict, offsets: np.ndarray, values: dict, surfaces: list,
+def _summary(scene: config.Scene, out_dir: str, owned: dict, offsets: np.ndarray, values: dict, surfaces: list,
              picture: str | None) -> None:
     """Per body its particles, volume and mass, per group its particles, the obstacles and
     the files (rank 0 prints; exact sums: the same on any rank count)."""

@@ -40,7 +40,7 @@ from parsph.walls import Walls
 class Simulation:
     """The particles this rank owns, of every body, and the loop that steps them."""
 
-    def __init__(self, scene: dict, local: LocalBody, comm, restart: dict | None = None):
+    def __init__(self, scene, local: LocalBody, comm, restart: dict | None = None):
         """Set up this rank's particles `local` (build.build_local, or a checkpoint's block
         partitioned); `restart` (io.checkpoint.load: clock and totals) continues a run."""
         self.scene = scene

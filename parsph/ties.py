@@ -245,7 +245,7 @@ def columns(ties, state, reduction):
     return values
 
 
-def build(scene: dict, state, ledger, topology) -> Ties | None:
+def build(scene, state, ledger, topology) -> Ties | None:
     """The ties of the scene's [[ties]], or None."""
     if not scene.ties:
         return None
