@@ -19,7 +19,6 @@ from numba import njit
 
 from parsph.exact_sum import Accumulator, Exact, allsum, totals
 from parsph.fields import MOMENT_COMPONENTS, Field, register
-from parsph.formulations import tlsph
 from parsph.interactions import RUNNING as INTERACTION_RUNNING, TERMS
 from parsph.materials import damage
 
@@ -134,7 +133,8 @@ class Ledger:
         """Keep what the step's works need from its start (after the commit, before the kick)."""
         n = state.n_owned
         self._start = dict(u=state.u[:n].copy(), v=state.v[:n].copy() if conditions.bcs.moving or conditions.collocation else None,
-                           f_hg=state.f_hg.copy(), f_visc=state.f_visc.copy(), force=state.force,
+                           **{f.name: getattr(state, f.name).copy() for f in state.forces() if f.work},
+                           force=state.force,
                            dissipation={i.name: i.dissipation.copy() for i in interactions if i.dissipative},
                            external=self.external,
                            obstacles=None, internal=state.internal_force, heating=state.viscous_heating.copy())
@@ -145,8 +145,8 @@ class Ledger:
         Eulerian kernel's search) repartitions them; {} between steps."""
         if self._start is None:
             return {}
-        per_particle = {"u", "force", "external", "internal"} | ({"f_hg"} if state.hourglass else set()) | (
-            {"f_visc", "heating"} if state.viscous else set())
+        per_particle = {"u", "force", "external", "internal"} | {f.name for f in state.forces() if f.work} | (
+            {"heating"} if state.viscous else set())
         out = {}
         for key, value in self._start.items():
             if key == "obstacles" and value is not None:
@@ -180,18 +180,18 @@ class Ledger:
         self._start["obstacles"] = (v_half, state.v[:n] - v_half, state.u[:n] - u_drift)
 
     def end(self, state, conditions, interactions, t: float, dt: float) -> None:
-        """Add the step's works (after the second kick): the paper hourglass forces', the
-        viscous forces', contact damping's and friction's (all absorbed), the external
-        forces' and obstacles', and the work that changes the kinetic energy of a
-        prescribed motion."""
+        """Add the step's works (after the second kick): the absorbed forces' (state.FORCES:
+        the paper hourglass forces', the viscous forces'), contact damping's and friction's,
+        the external forces' and obstacles', and the work that changes the kinetic energy of
+        a prescribed motion."""
         n, start = state.n_owned, self._start
         du = state.u[:n] - start["u"]
-        for b in state.bodies:
-            if b.formulation.hourglass_form == tlsph.HOURGLASS_PAPER:  # not a potential force
-                work = -0.5 * (start["f_hg"][b.lo:b.hi] + state.f_hg[b.lo:b.hi]) * du[b.lo:b.hi]
-                self.totals["hourglass_work"][b.index].add(work)
+        for force in (f for f in state.forces() if f.work):  # forces without a potential
+            now = getattr(state, force.name)
+            for b in (b for b in state.bodies if force.absorbs(b.formulation)):
+                work = -0.5 * (start[force.name][b.lo:b.hi] + now[b.lo:b.hi]) * du[b.lo:b.hi]
+                self.totals[force.work][b.index].add(self.part(b, work))
         if state.viscous:
-            self.add("viscous_work", -0.5 * (start["f_visc"] + state.f_visc) * du)
             state.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + state.viscous_heating)
         for interaction in interactions:  # contact damping's and friction's, the ties' dashpots'
             if interaction.name in start["dissipation"]:

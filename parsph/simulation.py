@@ -25,6 +25,7 @@ from parsph.conditions import Conditions
 from parsph.diagnostics import history_row
 from parsph.errors import ParsphError
 from parsph.failure import Failure
+from parsph.formulations.base import Running
 from parsph.ledger import Ledger
 from parsph.interactions import Interactions
 from parsph.kernel_relation import Configuration
@@ -56,11 +57,10 @@ class Simulation:
         self.failure = Failure(bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, bodies, local, comm)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
-        self.t = restart["clock"]["t"] if restart else 0.0  # the constraints in force depend on it
-        self.step_count = 0
-        self.step_dt = 0.0  # the step that brought F from the committed state (rate-dependent laws)
         self.ledger = Ledger(bodies)
         self.stable = StableStep(scene.time)
+        # the clock, and what the stages read while the run goes (formulations.base.Running)
+        self.running = Running(self.ledger, self.stable, restart["clock"]["t"] if restart else 0.0)
         self.walls = Walls(scene.walls, scene.tools, dim, scene.surfaces, scene.parameters)
         self.conditions = Conditions(scene)
         self.adopt(local)
@@ -130,7 +130,7 @@ class Simulation:
     def make_stages(self) -> None:
         """The bodies' stages on the adopted state (formulations.base); a rigid body has none."""
         for b in self.state.bodies:
-            b.stages = [] if b.rigid else b.formulation.stages(self, b)
+            b.stages = [] if b.rigid else b.formulation.stages(self.state, b, self.running)
             if b.rigid:
                 self.state.F[b.lo:b.hi] = np.eye(self.state.dim)
 
@@ -175,9 +175,12 @@ class Simulation:
                 seconds[stage.name] += clock() - t0
                 stale.update(stage.writes)
             k += 1
-        internal = state.f_int + state.f_hg if state.hourglass else state.f_int.copy()
-        if state.viscous:
-            internal += state.f_visc
+        internal = None
+        for force in state.forces():  # state.FORCES
+            if internal is None:
+                internal = getattr(state, force.name).copy()
+            else:
+                internal += getattr(state, force.name)
         for interaction in self.interactions:  # parsph.interactions
             t0 = clock()
             reads = [name for name in interaction.reads if name in stale]
@@ -315,6 +318,33 @@ class Simulation:
     def dt(self) -> float:
         """The step size the next step will use (unless shortened to end at t_end)."""
         return self.stable.dt
+
+    @property
+    def t(self) -> float:
+        """The time reached (the constraints in force depend on it)."""
+        return self.running.t
+
+    @t.setter
+    def t(self, value: float) -> None:
+        self.running.t = value
+
+    @property
+    def step_count(self) -> int:
+        """The steps taken."""
+        return self.running.step
+
+    @step_count.setter
+    def step_count(self, value: int) -> None:
+        self.running.step = value
+
+    @property
+    def step_dt(self) -> float:
+        """The size of the last step, which brought F from the committed state (rate-dependent laws)."""
+        return self.running.dt
+
+    @step_dt.setter
+    def step_dt(self, value: float) -> None:
+        self.running.dt = value
 
     # ----------------------------------------------------------------- the public read-outs
     def group_index(self, name: str) -> np.ndarray:

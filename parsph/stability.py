@@ -1,5 +1,5 @@
 """The step size and the run's instabilities: the stable time step of all bodies
-(formulations.tlsph.stable_time_step, rigid.stable_step) with time.cfl or a fixed
+(their formulations' stable_step, rigid.stable_step) with time.cfl or a fixed
 time.dt, its floor, and the errors that name the particle or point where a run broke down
 with what to change.
 """
@@ -13,7 +13,6 @@ from mpi4py import MPI
 
 from parsph import rigid
 from parsph.errors import InputError, ParsphError
-from parsph.formulations import tlsph
 from parsph.parallel.runtime import collective
 
 
@@ -58,7 +57,7 @@ class StableStep:
         """(stable step, each kernel relation's largest incremental log strain) over all
         ranks of the rank's particles (`state`: state.RankState) in their kernel relations
         (`topology`) and interactions (their springs: interactions.Interactions), from
-        formulations.tlsph.stable_time_step (collective). A step of zero, or below
+        their formulations' stable_step (collective). A step of zero, or below
         time.step_floor times the first one, raises the error naming the particle with the
         smallest step on any rank, at `step` and time t."""
         dt, smallest = np.inf, -1
@@ -67,11 +66,7 @@ class StableStep:
             if b.rigid:
                 size, worst, first = rigid.stable_step(b, interactions.omega2, state.step_limit, state.v, interactions.contact)
             else:
-                ref = b.relation.ref
-                size, worst, first = tlsph.stable_time_step(
-                    b.lo, b.hi, state.fs if b.moves else state.F, state.F, state.J, ref.min_spacing, ref.stiffening,
-                    b.constants.wave_speed, b.law.law_id, b.constants.values, state.dim, state.broken, state.omega_hg2,
-                    b.formulation.hourglass_form, interactions.omega2, state.step_limit, state.scratch33)
+                size, worst, first = b.formulation.stable_step(state, b, interactions.omega2)
             if b.moves:  # the strain since a reference that moves
                 strains[b.relation.index] = max(strains[b.relation.index], worst)
             if size < dt or (first >= 0 and not size > 0.0):
@@ -164,23 +159,24 @@ def breakdown(J: float) -> str:
     return f"has a stress that is not finite (J = {J:.4g})"
 
 
-def unstable_particle(sim, i: int) -> ParsphError:
-    """The error for owned particle i, inverted or with a stress that is not finite."""
-    where = ", ".join(f"{c:.6g}" for c in sim.state.X[i] + sim.state.u[i])
+def unstable_particle(running, state, i: int) -> ParsphError:
+    """The error for owned particle i of `state` (state.RankState), inverted or with a stress
+    that is not finite, in the step after `running`'s (formulations.base.Running)."""
+    where = ", ".join(f"{c:.6g}" for c in state.X[i] + state.u[i])
     return ParsphError(
-        f"particle {int(sim.state.gid[i])} at ({where}) {breakdown(sim.state.J[i])} at step {sim.step_count + 1}, "
-        f"t = {sim.t:.6g}; the run is unstable: {sim.stable.advice()}")
+        f"particle {int(state.gid[i])} at ({where}) {breakdown(state.J[i])} at step {running.step + 1}, "
+        f"t = {running.t:.6g}; the run is unstable: {running.stable.advice()}")
 
 
-def unstable_point(sim, points: str, q: int) -> ParsphError:
+def unstable_point(running, state, points: str, q: int) -> ParsphError:
     """The error for owned point q of set `points`, inverted or with a stress that is
-    not finite."""
-    A = sim.state.sets[points].arrays
+    not finite (the arguments as for unstable_particle)."""
+    A = state.sets[points].arrays
     where = ", ".join(f"{c:.6g}" for c in A["X"][q])
     what = points[:-1].replace("_", " ")
     return ParsphError(
         f"{what} {int(A['gid'][q])} at reference ({where}) {breakdown(A['J'][q])} at step "
-        f"{sim.step_count + 1}, t = {sim.t:.6g}; the run is unstable: {sim.stable.advice()}")
+        f"{running.step + 1}, t = {running.t:.6g}; the run is unstable: {running.stable.advice()}")
 
 
 def check_hourglass_stiffness(state, topology) -> None:

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from parsph import fields, materials
-from parsph.formulations import FORMULATIONS, tlsph
+from parsph.formulations import FORMULATIONS
 from parsph.parallel.decomposition import Decomposition, LocalBody
 from parsph.points import PointSet
 
@@ -83,6 +84,26 @@ WORK = (
 )
 
 
+@dataclass(frozen=True)
+class Force:
+    """A force between particles that the bodies' stages write into the work array `name`
+    (owned rows): summed into the internal force in FORCES' order where the bodies need the
+    array; a force without a potential has its work (trapezoidal in the step) booked to the
+    ledger's running total `work` for the bodies whose formulation `absorbs` it
+    (ledger.Ledger.end)."""
+
+    name: str
+    work: str | None = None
+    absorbs: Callable = lambda formulation: True
+
+
+FORCES = (
+    Force("f_int"),  # the stress's: its work is the strain energy
+    Force("f_hg", "hourglass_work", lambda f: f.absorbs_hourglass_work),  # the variational form's is a potential
+    Force("f_visc", "viscous_work"),  # artificial viscosity
+)
+
+
 class RankState:
     """The rank's particles of every body (its `bodies`, state.Body): the carried fields
     (parsph.fields) and the declared work arrays (WORK) on owned rows first, then ghosts,
@@ -100,9 +121,9 @@ class RankState:
         self.eulerian = any(f.eulerian for f in moving)  # the reference moves at every step, inside it
         self.eta = max(f.eta for f in forms)
         self.hourglass = any(f.hourglass_form for f in forms)
-        self.viscous = any(any(getattr(f, "viscosity", ())) for f in forms)
+        self.viscous = any(f.viscous for f in forms)
         self.needs = {"hessian": self.eta > 0, "hourglass": self.hourglass, "viscous": self.viscous,
-                      "variational": any(f.hourglass_form == tlsph.HOURGLASS_VARIATIONAL for f in forms),
+                      "variational": any(f.hourglass_penalty for f in forms),
                       "limited": self.viscous or limited}
         # the formulations, laws and their states, the updated reference and damage the bodies use
         self.owners = {f.type for f in forms} | {b.law.name for b in bodies} | {b.law.state for b in bodies}
@@ -156,6 +177,11 @@ class RankState:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, decomp, self.carried, arrays)
         self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
+
+    def forces(self) -> list:
+        """The forces of FORCES whose arrays the bodies need (state.Force)."""
+        needs = {w.name: w.need for w in WORK}
+        return [f for f in FORCES if needs[f.name] is None or self.needs[needs[f.name]]]
 
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned

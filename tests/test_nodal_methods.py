@@ -94,13 +94,13 @@ def test_affine_motion_of_a_random_set_rlm_exact_sph_not_even_inside():
     scale = np.abs(H).max()
     rlm = random_patch("rlm")
     impose_affine(rlm)
-    n = rlm.n_owned
+    n = rlm.state.n_owned
     assert np.abs(rlm.quantity("deformation_gradient") - (np.eye(2) + H)).max() < 1e-13  # measured 6.7e-16
 
     sph = random_patch("sph")
     impose_affine(sph)
     X = sph.quantity("reference_position")
-    inside = np.minimum(X, 1.0 - X).min(axis=1) > sph.support[:n]  # support not cut by the edge
+    inside = np.minimum(X, 1.0 - X).min(axis=1) > sph.state.support[:n]  # support not cut by the edge
     assert inside.sum() > 60
     err = np.abs(sph.quantity("deformation_gradient") - (np.eye(2) + H)).max(axis=(1, 2))
     # an irregular set breaks the lattice's symmetry: no linear completeness anywhere
@@ -112,7 +112,7 @@ def test_affine_motion_of_a_random_set_rlm_exact_sph_not_even_inside():
     # RLM's F is the corrected one of tlsph (identically, for any displacement)
     tl = simulation("patch_random", ['kernel.type="cubic_spline"', "formulation.hourglass=0",
                                      "geometry.parts.0.count=200"])
-    u = 0.01 * np.random.default_rng(5).standard_normal(tl.u.shape)
+    u = 0.01 * np.random.default_rng(5).standard_normal(tl.state.u.shape)
     for sim in (tl, rlm):
         sim.state.u[:] = u
         sim.compute_forces()

@@ -1,6 +1,7 @@
-"""What a formulation gives the simulation loop: the fields it carries per particle and the
-stages of a force evaluation, each declaring the fields it reads at neighbours and the ones
-it writes on owned points.
+"""What a formulation gives the simulation loop: the members every family has
+(Formulation, the protocol the rest of the code reads a body's formulation through), the
+fields it carries per particle and the stages of a force evaluation, each declaring the
+fields it reads at neighbours and the ones it writes on owned points.
 
 The loop (simulation.Simulation.compute_forces) runs the stages of all bodies phase by
 phase; before a phase it refreshes the ghost values of every field the phase reads at
@@ -17,6 +18,8 @@ import os
 import tempfile
 from dataclasses import dataclass
 from typing import Callable
+
+import numpy as np
 
 from parsph.errors import InputError
 from parsph.keys import Key, in_range, one_of, positive
@@ -39,6 +42,109 @@ KEYS = {
                 "as a fraction of the support (default 0.25; at most 2: the lists hold (1 + skin)^d "
                 "times the pairs)"),
 }
+
+
+class Formulation:
+    """One body's formulation as the rest of the code sees it: what a family (formulations.nodal,
+    formulations.galerkin) declares, the options the loop and the kernel relations read, and
+    what it builds, evaluates and integrates. The defaults are those of a family without the
+    feature (no hourglass control, no Hessian stabilisation, no artificial viscosity, no
+    reference update by count or strain, no points of its own, no collocation)."""
+
+    TYPES: dict = {}  # the formulation.type names it serves, with a line each
+    KEYS: dict = {}  # its formulation keys (the other families refuse those that do not apply to them)
+    damage = False  # tensile damage (materials.damage) is computed at its particles
+
+    type: str  # formulation.type
+    updated = False  # its reference moves (ulsph, an Eulerian kernel)
+    eulerian = False  # the reference moves at every step, inside it (an Eulerian kernel)
+    conserves_momentum = True  # its internal forces sum to zero (the balance check's momenta)
+    conserves_energy = True  # its forces are its strain energy's gradient (the balance check's energy)
+    alpha = 0.0  # hourglass coefficient [G eq. 31]
+    hourglass_form = 0  # tlsph.HOURGLASS_*: HOURGLASS_OFF (0) without hourglass control
+    hourglass_penalty = False  # its hourglass force derives from a penalty energy (the variational form)
+    absorbs_hourglass_work = False  # its hourglass force is not a potential one: its work is absorbed [G eq. 32]
+    viscous = False  # it adds Monaghan's artificial viscosity
+    eta = 0.0  # Hessian's-difference stabilisation [V eq. 17]: 0 without
+    weighted_hessian = True  # the Hessian's linear correction weighted by the kernel (with eta > 0)
+    update_every = 0  # steps between reference updates (1 with an Eulerian kernel; 0: not by count)
+    update_strain = 0.0  # the log strain since the reference that updates it (0: not by strain)
+    collocates = False  # its constraints act through its trial functions (parsph.collocation)
+
+    @staticmethod
+    def resolve(path: str, form: dict) -> None:
+        """Its defaults and rules on a formulation table `form` checked against the schema
+        (InputError naming the key at `path`)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def check_body(body: dict, where: str, scene: dict) -> None:
+        """Its rules on a resolved body of the scene (InputError naming `where`)."""
+
+    @staticmethod
+    def moves_reference(form: dict) -> bool:
+        """Whether a formulation table moves its reference."""
+        raise NotImplementedError
+
+    def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
+        """Its options from the resolved formulation table, compiled for the dimension, the
+        material law and the failure model (0: none) of its body."""
+        self.type = options["type"]
+
+    @property
+    def pair_options(self):
+        """The options of its particle pairs in its kernel relation
+        (formulations.reference.PairOptions)."""
+        raise NotImplementedError
+
+    def build(self, state, body, kernel: str, skin: float = 0.0, search: bool = True) -> None:
+        """Its own relations on the adopted state (state.RankState) besides the particle
+        pairs of its kernel relation: none."""
+
+    def stages(self, state, body, running: Running) -> list:
+        """The passes (Stage) of one force evaluation over `body`'s owned points of `state`
+        (state.RankState), reading what changes while the run goes from `running`."""
+        raise NotImplementedError
+
+    def moved(self, state, body) -> np.ndarray:
+        """Positions of the body's owned points of its own set in the current configuration
+        (the Eulerian kernel's update); only a family with such points has them."""
+        raise NotImplementedError(f"formulation '{self.type}' has no points of its own")
+
+    def trial_functions(self) -> tuple:
+        """(ptr, idx, Phi) of its trial functions from the owned particles to the particles,
+        for collocated constraints (collocates)."""
+        raise NotImplementedError(f"formulation '{self.type}' does not collocate its constraints")
+
+    def quadrature(self, state, body) -> list:
+        """[(X, F, w)] of the body's owned integration points: reference positions,
+        deformation gradients, quadrature weights."""
+        raise NotImplementedError
+
+    def integrated(self, state, body, density) -> np.ndarray:
+        """w_q q_q over the body's owned integration points, q = density(arrays) per row of a
+        point set's arrays (a density per unit reference volume: psi, plastic work)."""
+        raise NotImplementedError
+
+    def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
+        """(stable step, largest incremental log strain, the row that sets the step or -1)
+        over the body's owned particles, with the interactions' springs' squared frequencies
+        `omega2` (formulations.tlsph.stable_time_step)."""
+        raise NotImplementedError
+
+
+class Running:
+    """What a body's stages read while the run goes, kept current by the loop
+    (simulation.Simulation): the steps taken and the time (for error messages), the size of
+    the last step (it brought F from the committed state: rate-dependent laws), the ledger
+    (ledger.Ledger: what stages book) and the stable step (stability.StableStep: the advice in
+    error messages)."""
+
+    def __init__(self, ledger, stable, t: float = 0.0):
+        self.ledger, self.stable = ledger, stable
+        self.t = t
+        self.step = 0
+        self.dt = 0.0
 
 
 class CompiledOnce:
@@ -90,6 +196,15 @@ class Stage:
     # a pass of the force row, which needs the state (F, stress) only: an Eulerian kernel
     # moves its reference to the current configuration before the first one
     force_row: bool = False
+
+
+def bound(state, fields: dict) -> dict:
+    """The rank's arrays a stage's kernel parameters are bound to: `fields` maps each
+    parameter to the field it takes, named as Stage.reads names the particles' fields (a
+    carried field or a work array of state.RankState), so that a stage declares as read at
+    neighbours the very arrays its kernel reads there."""
+    arrays = state.particles.arrays
+    return {p: arrays[name] if name in arrays else getattr(state, name) for p, name in fields.items()}
 
 
 def check_shared_keys(path: str, form: dict, kind: str, moves_reference: bool) -> None:

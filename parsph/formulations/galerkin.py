@@ -42,7 +42,7 @@ from numba import njit
 from parsph import COMPILED_SOURCE, stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
-from parsph.formulations.base import CompiledOnce, Stage, check_shared_keys
+from parsph.formulations.base import CompiledOnce, Formulation, Running, Stage, check_shared_keys
 from parsph.formulations.nodal import EULERIAN
 from parsph.formulations.reference import PairOptions
 from parsph.formulations import tlsph
@@ -147,9 +147,10 @@ class Coupling:
     integrates: bool  # False: the particles of efg cells carry F and stress as read-outs only
 
 
-class GalerkinFormulation:
+class GalerkinFormulation(Formulation):
     """One body's Galerkin formulation: shape functions, integration points, compiled
-    stages, strain energy."""
+    stages, strain energy (the members: base.Formulation; no hourglass control, Hessian
+    stabilisation, artificial viscosity or strain trigger of reference updates)."""
 
     TYPES = {  # formulation.type names it serves
         "kbm": "Krongauz-Belytschko corrected gradients with stress points [R §5.2] (a box)",
@@ -161,10 +162,6 @@ class GalerkinFormulation:
                            "[R §5.3] (cells: a box)"),
     }
     damage = False  # tensile damage is computed at the particles of the particle formulations
-    eta = 0.0  # what the loop asks of every formulation: no Hessian stabilisation,
-    hourglass_form = 0  # no hourglass control, no strain trigger of reference updates
-    weighted_hessian = True
-    update_strain = 0
 
     @staticmethod
     def resolve(path: str, form: dict) -> None:
@@ -216,7 +213,7 @@ class GalerkinFormulation:
                              "efg with nodal integration, or model the whole body")
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):  # failure: particle methods only
-        self.type = options["type"]
+        super().__init__(options, dim, law, failure)
         self.shape = "kbm" if self.type == "kbm" else "mls"
         self.points = integration_set(options)  # the other set, if any
         # the Eulerian kernel: the updated reference rebuilt at every step (as for sph, rlm)
@@ -224,6 +221,8 @@ class GalerkinFormulation:
         self.conserves_momentum = True  # the shape functions' gradients sum to zero
         self.conserves_energy = self.type != "kbm"  # KBM's Petrov-Galerkin force is not its energy's gradient
         self.update_every = 1 if self.updated else 0
+        # EFG's MLS functions reproduce linear fields: its constraints are collocated (parsph.collocation)
+        self.collocates = self.shape == "mls"
         self.kinematics_stress, self.forces = compile_stages(dim, law, self.eulerian)
         self.couplings = []
         self.kept = {}  # the Eulerian kernel's relations kept between searches, by (set, trial or test)
@@ -305,49 +304,65 @@ class GalerkinFormulation:
             return state.particles.arrays["weight"]
         return state.volume if self.points is None else np.zeros(len(state.volume))
 
-    def stages(self, sim, body) -> list:
+    def trial_functions(self) -> tuple:
+        """(ptr, idx, Phi) of the trial relation from the body's particles to particles."""
+        coupling = self.couplings[0]
+        return coupling.ptr, coupling.idx, coupling.phi
+
+    def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
+        """The stable step of F at the particles, without hourglass springs
+        (formulations.tlsph.stable_time_step)."""
+        ref = body.relation.ref
+        return tlsph.stable_time_step(
+            body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
+            ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
+            state.broken, state.omega_hg2, tlsph.HOURGLASS_OFF, omega2, state.step_limit, state.scratch33)
+
+    def stages(self, state, body, running: Running) -> list:
+        """The passes of one force evaluation over `body`'s owned particles and integration
+        points of `state`."""
         c = body.constants.values
         runs = []
         for coupling in self.couplings:
             if coupling.points == "particles":
-                arrays = dict(fs=sim.state.fs if self.updated else sim.state.F, F=sim.state.F, Fr=sim.state.Fr if self.updated else sim.state.F,
-                              VP=sim.state.VP, J=sim.state.J, psi=sim.state.psi)
+                arrays = dict(fs=state.fs if self.updated else state.F, F=state.F, Fr=state.Fr if self.updated else state.F,
+                              VP=state.VP, J=state.J, psi=state.psi)
                 lo, hi = body.lo, body.hi
-                fail = (lambda i: stability.unstable_particle(sim, i))
+                fail = (lambda i: stability.unstable_particle(running, state, i))
             else:
-                A = sim.state.sets[coupling.points].arrays
+                A = state.sets[coupling.points].arrays
                 arrays = A if self.updated else dict(A, fs=A["F"], Fr=A["F"])  # total-Lagrangian: F^r = I
                 lo, hi = body.set_rows[coupling.points]
-                fail = (lambda q, name=coupling.points: stability.unstable_point(sim, name, q))
-            runs.append((coupling, arrays, lo, hi, fail, self.weights(sim.state, coupling.points),
+                fail = (lambda q, name=coupling.points: stability.unstable_point(running, state, name, q))
+            runs.append((coupling, arrays, lo, hi, fail, self.weights(state, coupling.points),
                          coupling.points))
 
         def displacement():  # from the updated reference, d = u - (X^r - X)
-            np.subtract(sim.state.u[body.lo:body.hi], sim.state.shift[body.lo:body.hi], out=sim.state.d[body.lo:body.hi])
+            np.subtract(state.u[body.lo:body.hi], state.shift[body.lo:body.hi], out=state.d[body.lo:body.hi])
 
-        scratch = (np.empty((sim.state.dim, sim.state.dim)), np.empty((update.WORK, 3, 3)))  # the kernel's
+        scratch = (np.empty((state.dim, state.dim)), np.empty((update.WORK, 3, 3)))  # the kernel's
 
         def kinematics_stress():
             for coupling, arrays, lo, hi, fail, weight, points in runs:
-                bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, sim.state.d,
-                                             weight, c, *sim.state.material_state(body, points), arrays["fs"],
+                bad = self.kinematics_stress(lo, hi, coupling.ptr, coupling.idx, coupling.G, coupling.base, state.d,
+                                             weight, c, *state.material_state(body, points), arrays["fs"],
                                              arrays["F"], arrays["Fr"], arrays["VP"], arrays["J"], arrays["psi"],
-                                             *scratch, sim.step_dt)
+                                             *scratch, running.dt)
                 if bad >= 0:
                     raise fail(bad)
 
         def forces():
-            sim.state.f_int[body.lo:body.hi] = 0.0
+            state.f_int[body.lo:body.hi] = 0.0
             for coupling, arrays, *_ in runs:
                 if coupling.integrates:
                     self.forces(body.lo, body.hi, coupling.test_ptr, coupling.test_idx, coupling.test_g,
-                                arrays["VP"], sim.state.f_int)
+                                arrays["VP"], state.f_int)
 
         prefix = f"{self.points}." if self.points else ""
         written = ("fs", "F", "VP", "J", "psi") + tuple(prefix + k for k in ("F", "VP", "J", "psi") if prefix)
         reads = tuple(("VP",) if self.points is None or self.type == "kbm" else ()) + \
             ((prefix + "VP",) if prefix else ())
-        return [Stage("kinematics+stress", displacement, writes=("d",))] * sim.state.updated + [
+        return [Stage("kinematics+stress", displacement, writes=("d",))] * state.updated + [
             Stage("kinematics+stress", kinematics_stress, reads=("d",), writes=written),
             Stage("forces", forces, reads=reads, writes=("f_int",), force_row=True)]
 

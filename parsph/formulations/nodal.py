@@ -29,7 +29,7 @@ from parsph import stability
 from parsph.errors import InputError
 from parsph.fields import Field, register
 from parsph.formulations import tlsph
-from parsph.formulations.base import Stage, check_shared_keys
+from parsph.formulations.base import Formulation, Running, Stage, bound, check_shared_keys
 from parsph.formulations.reference import PairOptions
 from parsph.kernels.functions import KERNEL_NAMES
 from parsph.keys import Key, non_negative, one_of
@@ -48,8 +48,8 @@ EULERIAN = ("{path}.kernel = 'eulerian' is available for type = 'sph', 'rlm', 'k
             "integration (for corrected SPH use type = 'ulsph' with update_every = 1)")
 
 
-class NodalFormulation:
-    """One body's formulation: its options and compiled stages."""
+class NodalFormulation(Formulation):
+    """One body's formulation: its options and compiled stages (the members: base.Formulation)."""
 
     TYPES = {  # formulation.type names it serves
         "tlsph": "corrected SPH, total-Lagrangian [G]",
@@ -104,27 +104,23 @@ class NodalFormulation:
         check_shared_keys(path, form, kind, NodalFormulation.moves_reference(form))
 
     @staticmethod
-    def check_body(body: dict, where: str, scene: dict) -> None:
-        """Its rules on a resolved body of the scene: none."""
-
-    @staticmethod
     def moves_reference(form: dict) -> bool:
         """Whether a formulation table moves its reference (ulsph, the Eulerian kernel)."""
         return form.get("kernel") == "eulerian" or form["type"] == "ulsph"
 
-    def build(self, state, body, kernel: str, skin: float = 0.0, search: bool = True) -> None:
-        """Its relations: the particle pairs, which its kernel relation holds (parsph.kernel_relation)."""
-
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
-        self.type = options["type"]
+        super().__init__(options, dim, law, failure)
         self.eulerian = options.get("kernel") == "eulerian"
         self.updated = self.type == "ulsph" or self.eulerian
         self.conserves_momentum = self.type != "rlm"  # RLM's force row [R Table 1] does not
         self.conserves_energy = self.type != "rlm"  # nor is it the energy's gradient
         self.alpha = options["hourglass"]
         self.hourglass_form = tlsph.HOURGLASS_FORMS[options["hourglass_form"]] if self.alpha > 0 else 0
+        self.hourglass_penalty = self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL
+        self.absorbs_hourglass_work = self.hourglass_form == tlsph.HOURGLASS_PAPER
         self.plastic_hourglass = options["plastic_hourglass"]  # a yielded particle's: [G §4.5], E or MACHDYN's
         self.viscosity = (options["viscosity"], options["viscosity_beta"])  # Monaghan's alpha, beta
+        self.viscous = any(self.viscosity)
         self.eta = options["hessian"]
         self.weighted_hessian = options["hessian_correction"] == "weighted"
         self.update_every, self.update_strain = (1, 0.0) if self.eulerian else \
@@ -132,12 +128,13 @@ class NodalFormulation:
         force = "rlm" if self.type == "rlm" else options["force_form"]
         reference = tlsph.REFERENCE_CURRENT if self.eulerian else \
             tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
-        viscous = self.hourglass_form == tlsph.HOURGLASS_PAPER and self.plastic_hourglass == "viscous"
+        viscous = self.absorbs_hourglass_work and self.plastic_hourglass == "viscous"
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
             dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, failure, viscous)
 
     @property
     def pair_options(self) -> PairOptions:
+        """Corrected gradients (but sph's), its hourglass control and Hessian stabilisation."""
         return PairOptions(corrected=self.type != "sph", hourglass_form=self.hourglass_form, alpha=self.alpha,
                            stabilised=self.eta > 0)
 
@@ -151,18 +148,26 @@ class NodalFormulation:
         particles' arrays (a density per unit reference volume: psi, plastic work)."""
         return state.volume[body.lo:body.hi] * density(state.particles.arrays)[body.lo:body.hi]
 
-    def stages(self, sim, body) -> list:
-        """The passes of one force evaluation over `body`'s owned particles of `sim`."""
+    def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
+        """The particles' stable step with its hourglass springs (formulations.tlsph.stable_time_step)."""
+        ref = body.relation.ref
+        return tlsph.stable_time_step(
+            body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
+            ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
+            state.broken, state.omega_hg2, self.hourglass_form, omega2, state.step_limit, state.scratch33)
+
+    def stages(self, state, body, running: Running) -> list:
+        """The passes of one force evaluation over `body`'s owned particles of `state`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
-        dim = sim.state.dim  # the kernels' scratch (they run without Numba's reference counting)
+        dim = state.dim  # the kernels' scratch (they run without Numba's reference counting)
         scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
         force_scratch = (np.empty(dim), np.empty(6), np.empty((3, 3)))
         out = []
-        fs = sim.state.fs if self.updated else sim.state.F  # the motion from the reference: F itself in the initial one
-        if sim.state.updated:  # d apart from u: the displacement since each body's reference
+        motion = "fs" if self.updated else "F"  # the motion from the reference: F itself in the initial one
+        if state.updated:  # d apart from u: the displacement since each body's reference
             def displacement():
                 lo, hi = body.lo, body.hi
-                np.subtract(sim.state.u[lo:hi], sim.state.shift[lo:hi], out=sim.state.d[lo:hi])
+                np.subtract(state.u[lo:hi], state.shift[lo:hi], out=state.d[lo:hi])
             out.append(Stage("kinematics+stress", displacement, writes=("d",)))
         plastic = self.plastic_hourglass == "yield_stress" and body.law.plastic is not None
         viscous = self.plastic_hourglass == "viscous" and hourglass and body.law.plastic is not None
@@ -171,45 +176,50 @@ class NodalFormulation:
                 lo, hi = body.lo, body.hi
                 modulus = np.full(hi - lo, body.constants.youngs)
                 if plastic:  # a yielded point's yield stress in place of E
-                    state = sim.state.material_state(body)[0][lo:hi]
-                    modulus = np.where(state[:, body.law.plastic.strain] > 0.0,
-                                       body.law.plastic.yield_stress(body.constants.values, state), modulus)
+                    committed = state.material_state(body)[0][lo:hi]
+                    modulus = np.where(committed[:, body.law.plastic.strain] > 0.0,
+                                       body.law.plastic.yield_stress(body.constants.values, committed), modulus)
                 if body.failure:
-                    modulus *= damage.hourglass_factor(sim.state.damage_state(body)[0][lo:hi])
+                    modulus *= damage.hourglass_factor(state.damage_state(body)[0][lo:hi])
                 if self.hourglass_form == tlsph.HOURGLASS_VARIATIONAL:
                     # the penalty E_i sum_j c_ij |e_ij|^2 / 2 of the last evaluation drops with the
                     # modulus without work: counted as released (as at reference updates)
-                    old = sim.state.youngs[lo:hi]
+                    old = state.youngs[lo:hi]
                     changed = (modulus != old) & (old > 0.0)  # a penalty at E = 0 is 0
                     if changed.any():
                         ratio = modulus / np.where(changed, old, 1.0)
-                        drop = np.where(changed, sim.state.hg_psi[lo:hi] * (1.0 - ratio), 0.0)
-                        sim.ledger.totals["hourglass_released"][body.index].add(drop)
-                sim.state.youngs[lo:hi] = modulus
+                        drop = np.where(changed, state.hg_psi[lo:hi] * (1.0 - ratio), 0.0)
+                        running.ledger.totals["hourglass_released"][body.index].add(drop)
+                state.youngs[lo:hi] = modulus
             out.append(Stage("kinematics+stress", hourglass_modulus, writes=("youngs",)))
         if hessian:
             def gradient():
                 ref = body.relation.ref
-                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, sim.state.d, sim.state.f)
+                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, state.d, state.f)
             out.append(Stage("kinematics+stress", gradient, reads=("d",), writes=("f",)))
 
+        # the parameters the kernels read at neighbours as their compile-time switches decide,
+        # bound by name to the fields they take: the stages declare those as read
+        fields = dict(d="d", f="f", fs=motion, Fr="Fr" if self.updated else "F")
+        neighbours = ("d", "f") if hessian else ("d",)
+
         def kinematics_stress():
-            ref = body.relation.ref
+            ref, a = body.relation.ref, bound(state, fields)
             bad = self.kinematics_stress(
-                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, sim.state.d, sim.state.volume,
-                sim.state.youngs, body.constants.values, *sim.state.material_state(body), *sim.state.damage_state(body), sim.state.f,
-                fs, sim.state.F, sim.state.Fr if self.updated else sim.state.F, sim.state.VP, sim.state.J, sim.state.psi, sim.state.hg_psi, *scratch, sim.step_dt)
+                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, ref.dx, ref.hgc, a["d"], state.volume,
+                state.youngs, body.constants.values, *state.material_state(body), *state.damage_state(body), a["f"],
+                a["fs"], state.F, a["Fr"], state.VP, state.J, state.psi, state.hg_psi, *scratch, running.dt)
             if bad >= 0:
-                raise stability.unstable_particle(sim, bad)
+                raise stability.unstable_particle(running, state, bad)
         states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
                        if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
-        out.append(Stage("kinematics+stress", kinematics_stress, reads=("d", "f") if hessian else ("d",),
+        out.append(Stage("kinematics+stress", kinematics_stress, reads=tuple(fields[p] for p in neighbours),
                          writes=("fs", "F", "VP", "J", "psi", "hg_psi") + trials))
         if hessian:
             def hessian_transpose():
                 ref = body.relation.ref
-                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, sim.state.VP, sim.state.B)
+                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, state.VP, state.B)
             out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",), force_row=True))
 
         # MACHDYN's viscous hourglass force: alpha, the wave speed, density, E, the plastic strain's column
@@ -217,25 +227,27 @@ class NodalFormulation:
                               body.law.plastic.strain if viscous else 0], float)
         kind = KERNEL_NAMES.index(body.relation.kernel)
 
+        force_fields = dict(d="d", fs=motion, VP="VP", B="B", youngs="youngs", v="v",
+                            plastic=body.law.state + "_trial" if viscous else "no_state")
+        force_neighbours = ("VP",) + (("d", "fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \
+            (("v", "plastic") if viscous else ())
+
         def forces():
-            ref = body.relation.ref
+            ref, a = body.relation.ref, bound(state, force_fields)
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
-                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, sim.state.d, fs, sim.state.VP, sim.state.B, sim.state.youngs,
-                        sim.state.volume, sim.state.mass, sim.state.f_int, sim.state.f_hg, sim.stable.bound_hourglass, sim.state.omega_hg2,
-                        *force_scratch, sim.state.v, sim.state.material_state(body)[1] if viscous else sim.state.no_state,
-                        sim.state.support, kind, constants)
-        reads = ("VP",) + (("d", "fs" if self.updated else "F", "youngs") if hourglass else ()) + \
-            (("B",) if hessian else ()) + \
-            (("v", body.law.state + "_trial") if viscous else ())
+                        ref.q_sum, ref.dx, ref.hgc, ref.hreg, a["d"], a["fs"], a["VP"], a["B"], a["youngs"],
+                        state.volume, state.mass, state.f_int, state.f_hg, running.stable.bound_hourglass, state.omega_hg2,
+                        *force_scratch, a["v"], a["plastic"], state.support, kind, constants)
+        reads = tuple(force_fields[p] for p in force_neighbours)
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2"), force_row=True))
         if any(self.viscosity):
             def viscosity():
                 ref = body.relation.ref
                 tlsph.artificial_viscosity(
-                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, sim.state.d, sim.state.v, sim.state.J,
-                    body.density, sim.state.volume_r if self.updated else sim.state.volume, sim.state.mass, sim.state.support,
-                    body.constants.wave_speed, *self.viscosity, sim.state.f_visc, sim.state.viscous_heating, sim.state.step_limit)
+                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.dx, state.d, state.v, state.J,
+                    body.density, state.volume_r if self.updated else state.volume, state.mass, state.support,
+                    body.constants.wave_speed, *self.viscosity, state.f_visc, state.viscous_heating, state.step_limit)
             out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc", "viscous_heating", "step_limit"),
                              force_row=True))
         return out
