@@ -173,9 +173,9 @@ def test_a_snapshot_with_a_value_that_is_not_finite_is_refused_before_it_is_writ
     writer = SnapshotWriter(str(tmp_path), "{}", MPI.COMM_SELF)
     writer.write(sim, ["position", "velocity"])
     before = (tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()
-    sim.v[7, 1] = np.inf
+    sim.state.v[7, 1] = np.inf
     sim.step_count += 1
-    message = rf"the snapshot at step 1, .*velocity of particle {sim.gid[7]} is not finite"
+    message = rf"the snapshot at step 1, .*velocity of particle {sim.state.gid[7]} is not finite"
     with pytest.raises(ParsphError, match=message):
         writer.write(sim, ["position", "velocity"])
     assert ((tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()) == before
@@ -211,8 +211,8 @@ def test_the_python_api_steps_to_the_state_a_run_wrote_and_reads_it_back(bar_run
     snapshots = read_snapshots(bar_run)
     assert [s.step for s in snapshots] == sorted({s.step for s in snapshots}) and snapshots[-1].time == sim.t
     last = read_snapshots(bar_run, ["gid", "position"], which=-1)[0]
-    n = sim.n_owned
-    assert np.array_equal(last["gid"], sim.gid[:n])
+    n = sim.state.n_owned
+    assert np.array_equal(last["gid"], sim.state.gid[:n])
     assert np.array_equal(last["position"][:, :1], sim.quantity("position"))
     h = read_history(bar_run)
     assert h["step"][-1] == sim.step_count and h["kinetic_energy"][-1] == sim.diagnostics()["kinetic_energy"]
