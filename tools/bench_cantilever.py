@@ -114,7 +114,7 @@ def run(method: str, n: int) -> dict:
     seconds = time.process_time() - start
     kinetic = float(0.5 * np.sum(sim.state.mass[:sim.state.n_owned, None] * sim.state.v[:sim.state.n_owned] ** 2))
     strain = sim.ledger.local(sim, "strain")
-    row = {"method": method, "n": n, "particles": sim.state.n_owned, "spacing": scene.parameters.D / n,
+    row = {"method": method, "n": n, "particles": sim.state.n_owned, "spacing": scene.parameters["D"] / n,
            "steps": sim.step_count, "cpu_seconds": seconds, "kinetic_energy": kinetic, "strain_energy": strain,
            "relaxed": bool(kinetic <= REST * strain), "l2": None, "energy": None, "tip": None}
     if row["relaxed"]:

@@ -242,7 +242,7 @@ def rod_case(scene):
     try:
         if COMM.rank == 0:
             with open(os.path.join(folder, "scene.json"), "w") as fh:
-                json.dump(scene, fh)
+                json.dump(scene.as_dict(), fh)
         writer = SnapshotWriter(folder, config.to_json(scene), COMM)
         fields = ["position", "velocity", "displacement"]
         seconds, _, _ = timed_run(sim, scene.time.end, probe=lambda s: writer.write(s, fields),
