@@ -24,8 +24,8 @@ from parsph.errors import InputError
 from parsph.simulation import Simulation
 
 
-def load_scene(source, overrides=()) -> dict:
-    """The resolved (validated, defaults filled in) scene of `source`: the path of a scene
+def load_scene(source, overrides=()) -> config.Scene:
+    """The resolved (validated, defaults filled in, typed: config.Scene) scene of `source`: the path of a scene
     file, TOML text (anything with a line break) or a raw scene dict (left unchanged), with
     each override "key.path=value" applied first, as `parsph run --set` does."""
     if isinstance(source, dict):
@@ -42,11 +42,12 @@ def load_scene(source, overrides=()) -> dict:
     return config.validate(raw)
 
 
-def build(scene: dict, comm=MPI.COMM_SELF) -> Simulation:
+def build(scene: config.Scene | dict, comm=MPI.COMM_SELF) -> Simulation:
     """The simulation of a resolved scene (load_scene) on the ranks of `comm` (collective),
-    at t = 0 with its initial conditions applied and its first forces evaluated. The scene
-    is validated as a scene file is (a resolved scene passes unchanged)."""
-    if not isinstance(scene, dict):
-        raise InputError(f"build takes a scene table (load_scene's), got {type(scene).__name__}: load it first")
-    scene = config.validate(scene)
+    at t = 0 with its initial conditions applied and its first forces evaluated. A scene
+    table is validated as a scene file is (a resolved scene passes unchanged)."""
+    if isinstance(scene, dict):
+        scene = config.validate(scene)
+    elif not isinstance(scene, config.Scene):
+        raise InputError(f"build takes a scene (load_scene's), got {type(scene).__name__}: load it first")
     return Simulation(scene, build_local(scene, comm), comm)

@@ -42,7 +42,7 @@ class BalanceCheck:
         not at all if not conserved);
         `restored`: state() of a checkpoint."""
         self.settings, self.dim, self.mass = settings, dim, mass
-        given = settings["energy"]
+        given = settings.energy
         self.energy_limit = given if given is not None else (DEFAULT_ENERGY if energy else DEFAULT_ENERGY_LOOSE)
         self.free_axes = free_axes
         self.momentum = momentum
@@ -85,20 +85,20 @@ class BalanceCheck:
         once), or raises ParsphError for a strict check."""
         errors = self.errors(row)
         row.update(errors)
-        limits = {"energy_error": self.energy_limit, "momentum_error": self.settings["momentum"],
-                  "angular_momentum_error": self.settings["momentum"]}
+        limits = {"energy_error": self.energy_limit, "momentum_error": self.settings.momentum,
+                  "angular_momentum_error": self.settings.momentum}
         tripped = [name for name, value in errors.items() if limits[name] > 0 and abs(value) > limits[name]]
         if not tripped:
             self.clean = {k: row[k] for k in self._tracked(row)}
             return []
         out = []
         for name in tripped:
-            if name in self.warned and not self.settings["strict"]:
+            if name in self.warned and not self.settings.strict:
                 continue
             self.warned.append(name)
             out.append(self._message(name, errors[name], limits[name], row))
         self.messages.extend(out)
-        if self.settings["strict"] and out:
+        if self.settings.strict and out:
             error = ParsphError(f"{out[0]}; the run is stopped (balance.strict)")
             error.agreed = True  # the same global row on every rank
             raise error

@@ -30,10 +30,10 @@ def values(spec: dict, path: str, X: np.ndarray, gid: np.ndarray, parameters: di
     """A condition's value at the particles X (rows): its `value` vector for all of them, or
     its `expression` per component evaluated at each."""
     dim = X.shape[1]
-    if spec.get("expression") is None:
-        return np.broadcast_to(np.asarray(spec["value"], float), (len(X), dim))
+    if spec.expression is None:
+        return np.broadcast_to(np.asarray(spec.value, float), (len(X), dim))
     out = np.empty((len(X), dim))
-    for k, text in enumerate(spec["expression"]):
+    for k, text in enumerate(spec.expression):
         out[:, k] = expressions.Field(f"{path}.expression[{k}]", text, parameters, dim)(X, gid)
     return out
 
@@ -91,11 +91,11 @@ class BoundaryConditions:
         dim = X.shape[1]
         self.items = []
         for i, spec in enumerate(specs):
-            index = np.flatnonzero(masks[spec["group"]])
-            comps = np.asarray(spec["components"], np.int64)
+            index = np.flatnonzero(masks[spec.group])
+            comps = np.asarray(spec.components, np.int64)
             value = values(spec, f"bc[{i}]", X[index], gid[index], parameters)
-            self.items.append(Constraint(spec["type"], index, comps, value, spec["ramp"],
-                                         spec.get("duration", math.inf)))
+            self.items.append(Constraint(spec.type, index, comps, value, spec.ramp,
+                                         math.inf if spec.duration is None else spec.duration))
         self.mask = np.zeros((len(X), dim), bool)
         self._active = None  # the items self.mask marks
         self._activate(t)
@@ -136,8 +136,8 @@ class Tractions:
         share = measure ** ((dim - 1) / dim) * thickness  # each particle's part of the surface
         self.items = []
         for i, spec in enumerate(specs):
-            index = np.flatnonzero(masks[spec["group"]])
-            area = share[index, None] if spec["area"] is None else spec["area"]
+            index = np.flatnonzero(masks[spec.group])
+            area = share[index, None] if spec.area is None else spec.area
             force = values(spec, f"tractions[{i}]", X[index], gid[index], parameters) * area
             self.items.append((index, force, spec))
 
@@ -148,11 +148,11 @@ class Tractions:
         """Add the traction forces at time t to `force` (owned particles): ramped up over
         `ramp`, zero from `duration` on, times exp(-t / decay)."""
         for index, f, spec in self.items:
-            factor = 1.0 if spec["ramp"] <= 0 else min(t / spec["ramp"], 1.0)
-            if spec["duration"] is not None and t >= spec["duration"]:
+            factor = 1.0 if spec.ramp <= 0 else min(t / spec.ramp, 1.0)
+            if spec.duration is not None and t >= spec.duration:
                 factor = 0.0
-            if spec["decay"] is not None:
-                factor *= math.exp(-t / spec["decay"])
+            if spec.decay is not None:
+                factor *= math.exp(-t / spec.decay)
             force[index] += f * factor
 
 
@@ -162,18 +162,18 @@ def apply_initial_conditions(specs: list, masks: dict, X, gid, u, v, parameters:
     position (parsph.expressions, over the scene's `parameters`); masks and arrays cover
     the owned particles (global ids `gid`)."""
     for i, spec in enumerate(specs):
-        sel = np.flatnonzero(masks[spec["group"]])
-        rel = X[sel] - np.asarray(spec["center"])
-        if spec["type"].endswith("_field"):
-            target = v if spec["type"] == "velocity_field" else u
+        sel = np.flatnonzero(masks[spec.group])
+        rel = X[sel] - np.asarray(spec.center)
+        if spec.type.endswith("_field"):
+            target = v if spec.type == "velocity_field" else u
             target[sel] = values(spec, f"initial[{i}]", X[sel], gid[sel], parameters)
-        elif spec["type"] == "velocity":
-            v[sel] = spec["value"]
-        elif spec["type"] == "angular_velocity":
-            omega = np.asarray(spec["omega"])
+        elif spec.type == "velocity":
+            v[sel] = spec.value
+        elif spec.type == "angular_velocity":
+            omega = np.asarray(spec.omega)
             if X.shape[1] == 2:
                 v[sel] += omega[0] * np.stack([-rel[:, 1], rel[:, 0]], axis=1)
             else:
                 v[sel] += np.cross(omega, rel)
         else:
-            u[sel] += rel @ np.asarray(spec["gradient"]).T
+            u[sel] += rel @ np.asarray(spec.gradient).T

@@ -161,15 +161,15 @@ def _neighbour_support(x: np.ndarray, target: int, comm) -> np.ndarray:
         reach *= 2.0
 
 
-def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> dict:
+def _body_particles(scene: config.Scene, body: dict, where: str, gens: list, comm) -> dict:
     """This rank's owned particles of one body (its parts united): "gid" numbered densely
     from 0, "X", "measure", "volume", "mass", "support"."""
-    dim = scene["scene"]["dimension"]
+    dim = scene.scene.dimension
     owned = partition(_block(gens, dim, comm), "X", comm)
     if len(gens) > 1:
         smallest = min(m for m in comm.allgather(float(owned["measure"].min()) if len(owned["X"]) else None)
                        if m is not None)
-        parts = body["parts"]
+        parts = body.parts
         spacing = np.array([_part_spacing(part, g) for part, g in zip(parts, gens)])
         owned, close = _join_parts(owned, np.cumsum([0] + [g.count for g in gens]), spacing,
                                    1e-6 * smallest ** (1.0 / dim), comm)
@@ -180,18 +180,18 @@ def _body_particles(scene: dict, body: dict, where: str, gens: list, comm) -> di
     X, measure = owned["X"], owned["measure"]
     factor = config.thickness(scene)
     owned["volume"] = measure * factor
-    owned["mass"] = owned["volume"] * body["material"]["density"]
+    owned["mass"] = owned["volume"] * body.material.density
     def with_stress_points(b):  # KBM: its particles integrate too, with their share of the cells
-        return galerkin.integration_set(b["formulation"]) == galerkin.STRESS_POINTS
+        return galerkin.integration_set(b.formulation) == galerkin.STRESS_POINTS
 
-    if any(with_stress_points(b) for b in config.bodies(scene)):  # quadrature weights
+    if any(with_stress_points(b) for b in scene.bodies):  # quadrature weights
         owned["weight"] = owned["volume"] if not with_stress_points(body) else \
             stress_points_of(gens[0], factor).particle_weights(owned["gid"])
-    neighbours = scene["kernel"]["neighbours"]
+    neighbours = scene.kernel.neighbours
     if neighbours > 0:
         owned["support"] = _neighbour_support(X, neighbours, comm)
     else:
-        owned["support"] = config.kernel_of(scene, body)["support"] * _spacing(body["parts"], gens, measure, dim)
+        owned["support"] = config.kernel_of(scene, body).support * _spacing(body.parts, gens, measure, dim)
     return owned
 
 
@@ -223,19 +223,19 @@ def _mesh_set(spec: dict, owned: dict, meshes: list) -> np.ndarray:
     return ~mask if invert else mask
 
 
-def build_integration_points(scene: dict, comm) -> dict:
+def build_integration_points(scene: config.Scene, comm) -> dict:
     """This rank's blocks of the point sets of integration points the scene's bodies need
     (formulations.galerkin: stress points, Gauss points; global ids body after body):
     "gid", "X", "volume" (quadrature weight), "body". Collective."""
-    specs = config.bodies(scene)
-    dim = scene["scene"]["dimension"]
+    specs = scene.bodies
+    dim = scene.scene.dimension
     kinds = {galerkin.STRESS_POINTS: stress_points_of, galerkin.GAUSS_POINTS: BoxGaussPoints}
     out = {}
     for name, kind in kinds.items():
-        users = [b for b, spec in enumerate(specs) if galerkin.integration_set(spec["formulation"]) == name]
+        users = [b for b, spec in enumerate(specs) if galerkin.integration_set(spec.formulation) == name]
         if not users:
             continue
-        gens = [kind(_generators(specs[b]["parts"], "geometry.parts", dim)[0], config.thickness(scene))
+        gens = [kind(_generators(specs[b].parts, "geometry.parts", dim)[0], config.thickness(scene))
                 for b in users]
         block = _block(gens, dim, comm)  # its "measure" is the points' quadrature weight
         first = np.cumsum([0] + [g.count for g in gens])
@@ -244,18 +244,18 @@ def build_integration_points(scene: dict, comm) -> dict:
     return out
 
 
-def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
+def build_bodies(scene: config.Scene, comm) -> tuple[dict, np.ndarray]:
     """This rank's owned particles of `scene` (arrays by global id: "gid", "X", "measure",
     "volume", "mass", "support", "groups" as uint8 columns by sorted group name), and the
     first global id of each body (with the total at the end): bodies are numbered one
     after the other. Collective; raises InputError on every rank for an empty or
     degenerate set."""
-    dim = scene["scene"]["dimension"]
-    specs = config.bodies(scene)
+    dim = scene.scene.dimension
+    specs = scene.bodies
     many = len(specs) > 1
     wheres = [f"bodies[{b}].parts" if many else "geometry.parts" for b in range(len(specs))]
     with collective(comm):
-        gens = [_generators(body["parts"], where, dim, comm) for body, where in zip(specs, wheres)]
+        gens = [_generators(body.parts, where, dim, comm) for body, where in zip(specs, wheres)]
         for body_gens, where in zip(gens, wheres):
             for i, g in enumerate(body_gens):
                 if isinstance(g, geometry.Fill):
@@ -263,7 +263,7 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
         total = sum(g.count for body_gens in gens for g in body_gens)
         if total > geometry.MAX_PARTICLES:
             raise InputError(f"the bodies produce {total} particles in all, more than 2^31")
-        neighbours = scene["kernel"]["neighbours"]
+        neighbours = scene.kernel.neighbours
         if neighbours > 0 and neighbours + 2 > total:
             raise InputError(f"kernel.neighbours = {neighbours} needs at least {neighbours + 2} "
                              f"particles, the scene has {total}")
@@ -278,11 +278,11 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
     owned = blocks[0] if not many else partition(
         {k: np.concatenate([b[k] for b in blocks]) for k in blocks[0]}, "X", comm)
     X, measure = owned["X"], owned["measure"]
-    names = sorted(scene["groups"])
+    names = sorted(scene.groups)
     groups = np.zeros((len(X), len(names)), np.uint8)
     with collective(comm):
         for k, name in enumerate(names):
-            spec = scene["groups"][name]
+            spec = scene.groups[name]
             try:
                 groups[:, k] = _mesh_set(spec, owned, meshes) if "mesh_set" in spec else \
                     geometry.select(spec, X, measure, owned["gid"], comm)
@@ -290,8 +290,8 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
                 raise InputError(f"groups.{name}: {exc}") from None
     owned["groups"] = groups
     del owned["mesh"], owned["element"]
-    used = {item["group"] for key in ("bc", "tractions", "walls", "tools", "surfaces", "initial", "probes")
-            for item in scene[key]}
+    used = {item.group for key in ("bc", "tractions", "walls", "tools", "surfaces", "initial", "probes")
+            for item in getattr(scene, key)}
     counts = comm.allreduce(groups.sum(axis=0, dtype=np.int64))
     with collective(comm):
         for name in sorted(used):
@@ -300,12 +300,12 @@ def build_bodies(scene: dict, comm) -> tuple[dict, np.ndarray]:
     return owned, np.array(offsets, np.int64)
 
 
-def build_particles(scene: dict, comm) -> dict:
+def build_particles(scene: config.Scene, comm) -> dict:
     """This rank's owned particles of `scene` (build_bodies without the body offsets)."""
     return build_bodies(scene, comm)[0]
 
 
-def build_local(scene: dict, comm) -> LocalBody:
+def build_local(scene: config.Scene, comm) -> LocalBody:
     """This rank's particles of `scene` with their ghost layers (and the other point sets,
     if any), ready for the simulation."""
     owned, offsets = build_bodies(scene, comm)

@@ -118,7 +118,7 @@ def main(argv=None) -> int:
 
             with collective():
                 scene = config.load(args.scene, args.set)
-            say(json.dumps(scene, indent=2))
+            say(json.dumps(scene.as_dict(), indent=2))
         elif args.command == "preview":
             from parsph.preview import preview
 

@@ -20,11 +20,11 @@ class Conditions:
     (`loads.body_acceleration`), mass-proportional damping (`time.damping`) and free rigid
     bodies on a rank's particles."""
 
-    def __init__(self, scene: dict):
+    def __init__(self, scene: config.Scene):
         self.scene = scene
-        body_acc = scene["loads"]["body_acceleration"]
+        body_acc = scene.loads.body_acceleration
         self.body_acc = None if body_acc is None else np.asarray(body_acc)
-        self.damping = scene["time"]["damping"]
+        self.damping = scene.time.damping
         self.rigid_bodies = []  # the freely moving ones, made after the initial conditions
         self.bcs = self.tractions = self.collocation = None
 
@@ -33,12 +33,12 @@ class Conditions:
         (collective)."""
         scene, n = self.scene, state.n_owned
         with collective(state.comm):
-            parameters = scene["parameters"]
-            self.bcs = BoundaryConditions(scene["bc"], state.groups, state.X[:n], state.gid[:n], parameters, t)
-            self.tractions = Tractions(scene["tractions"], state.groups, state.X[:n], state.gid[:n],
+            parameters = scene.parameters
+            self.bcs = BoundaryConditions(scene.bc, state.groups, state.X[:n], state.gid[:n], parameters, t)
+            self.tractions = Tractions(scene.tractions, state.groups, state.X[:n], state.gid[:n],
                                        state.measure[:n], config.thickness(scene), parameters)
         efg = any(collocated(b.formulation) for b in state.bodies)
-        self.collocation = BoundaryCollocation(state, self.bcs) if efg and scene["bc"] else None
+        self.collocation = BoundaryCollocation(state, self.bcs) if efg and scene.bc else None
 
     def recollocate(self, state) -> None:
         """The collocation in a new reference of the EFG bodies (on the kept lists)."""

@@ -1,15 +1,19 @@
 """Scene files: TOML schema, defaults, validation and `--set` overrides.
 
-A scene is read with the standard library's `tomllib`, checked against SCHEMA below and
-returned as a plain nested dict with every default filled in (the *resolved scene*). The
-resolved scene is what the solver reads and what every output file stores. Any problem is
-an `InputError` whose message names the key (`material.density`, `bc[1].group`, ...).
+A scene is read with the standard library's `tomllib`, checked against the Key tables below
+and resolved: every default filled in. The solver reads the resolved scene typed (`Scene`:
+a frozen section per table, `scene.time.cfl`, and a tuple of typed entries per array of
+tables, `scene.walls[0].normal`, their classes made from the Key tables by
+parsph.sections); every output file stores it as the nested table (`Scene.as_dict`,
+`to_json`). Any problem is an `InputError` whose message names the key
+(`material.density`, `bc[1].group`, ...).
 """
 
 from __future__ import annotations
 
 import ast
 import copy
+import dataclasses
 import difflib
 import operator
 import json
@@ -19,12 +23,14 @@ import re
 import stat
 import sys
 import tomllib
+from dataclasses import make_dataclass
 from typing import Any
 
 from parsph import expressions, quantities, surfaces, ties
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, greater_than, in_range, non_negative, one_of, positive
 from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
+from parsph.sections import section
 from parsph.materials import FAILURE_KEYS, LAW_KEYS, LAWS, check_failure, constants, failure_of
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
@@ -844,9 +850,9 @@ def _check_updated_bodies(bodies_: list) -> None:
 BODY_KERNEL_KEYS = ("type", "support")  # the keys of [kernel] a body may change
 
 
-def kernel_of(scene: dict, body: dict) -> dict:
-    """A resolved body's kernel: [kernel] with the body's own keys over it."""
-    return dict(scene["kernel"], **body.get("kernel", {}))
+def kernel_of(scene: Scene, body) -> Any:
+    """A body's kernel: the scene's [kernel] section with the body's own keys over it."""
+    return dataclasses.replace(scene.kernel, **body.kernel)
 
 
 def moves(body: dict) -> bool:
@@ -854,22 +860,62 @@ def moves(body: dict) -> bool:
     return not body.get("rigid", False) and _kept_lists(body["formulation"])
 
 
-def thickness(scene: dict) -> float:
+def thickness(scene: Scene) -> float:
     """Volume per unit d-dimensional measure: the cross-section in 1D, the thickness in 2D."""
-    return {1: scene["geometry"]["area"], 2: scene["geometry"]["thickness"], 3: 1.0}[scene["scene"]["dimension"]]
+    return {1: scene.geometry.area, 2: scene.geometry.thickness, 3: 1.0}[scene.scene.dimension]
 
 
-def bodies(scene: dict) -> list:
-    """The scene's bodies: its [[bodies]], or the one body of geometry.parts, [material] and
-    [formulation] (named "body")."""
+def _bodies(scene: dict) -> list:
+    """The resolved scene's bodies: its [[bodies]], or the one body of geometry.parts,
+    [material] and [formulation] (named "body")."""
     if "bodies" in scene:
         return scene["bodies"]
     return [{"name": "body", "parts": scene["geometry"]["parts"], "material": scene["material"],
              "formulation": scene["formulation"]}]
 
 
-def validate(raw: dict) -> dict:
-    """Check a raw scene dict and return the resolved scene (defaults filled in).
+# The typed sections (parsph.sections) of the resolved scene, made from the Key tables:
+# a section per table, an entry class per array of tables (a new array of TOP_LEVEL needs its own).
+SECTION_TYPES = {name: section(name.capitalize(), keys) for name, keys in SECTIONS.items()}
+ENTRY_TYPES = {name: section(cls, keys) for name, cls, keys in (
+    ("bc", "Condition", BC_KEYS), ("tractions", "Traction", TRACTION_KEYS), ("walls", "Wall", WALL_KEYS),
+    ("tools", "Tool", TOOL_KEYS), ("surfaces", "Surface", SURFACE_KEYS), ("symmetry", "Plane", SYMMETRY_KEYS),
+    ("initial", "Initial", INITIAL_KEYS), ("probes", "Probe", PROBE_KEYS), ("contact", "ContactPair", CONTACT_KEYS),
+    ("ties", "Tie", TIE_KEYS), ("bodies", "Body", BODY_KEYS))}
+
+
+class _SceneBase:
+    """The resolved scene, typed: a section per table (`scene.time.cfl`), a tuple of entries
+    per array of tables (`scene.walls[0].normal`; `bodies`: the [[bodies]], or the one body
+    of a scene without them), `parameters` and `groups` as tables of names."""
+
+    __slots__ = ()
+
+    def as_dict(self) -> dict:
+        """The resolved scene as a nested dict, as outputs and checkpoints store it."""
+        return copy.deepcopy(self._resolved)
+
+
+Scene = make_dataclass("Scene", [*TOP_LEVEL, "_resolved"], bases=(_SceneBase,), frozen=True, slots=True)
+Scene.__doc__, Scene.__module__ = _SceneBase.__doc__, __name__
+
+
+def _typed(resolved: dict) -> Scene:
+    """The Scene of a resolved scene dict."""
+    values = {name: SECTION_TYPES[name].of(resolved[name]) if name in resolved else None for name in SECTIONS}
+    for name, cls in ENTRY_TYPES.items():
+        if name != "bodies":
+            values[name] = tuple(cls.of(item) for item in resolved.get(name, ()))
+    values["bodies"] = tuple(ENTRY_TYPES["bodies"].of(
+        body, material=SECTION_TYPES["material"].of(body["material"]),
+        formulation=SECTION_TYPES["formulation"].of(body["formulation"])) for body in _bodies(resolved))
+    values["parameters"] = dict(resolved["parameters"])
+    values["groups"] = copy.deepcopy(resolved["groups"])
+    return Scene(**values, _resolved=copy.deepcopy(resolved))
+
+
+def validate(raw: dict) -> Scene:
+    """Check a raw scene dict and return the resolved scene (defaults filled in), typed.
 
     String values of the form "= EXPR" are first evaluated over [parameters]."""
     if not isinstance(raw, dict):
@@ -914,26 +960,26 @@ def validate(raw: dict) -> dict:
                              "sets every particle's support from its neighbours")
     _vector_len("loads.body_acceleration", scene["loads"]["body_acceleration"], dim)
     scene["groups"] = _validate_groups(raw.get("groups"), dim,
-                                       sum(p["shape"] == "mesh" for b in bodies(scene) for p in b["parts"]))
+                                       sum(p["shape"] == "mesh" for b in _bodies(scene) for p in b["parts"]))
     _validate_lists(scene, raw, dim)
-    for body in bodies(scene):
+    for body in _bodies(scene):
         model = failure_of(body["material"])
         if model and (LAWS[body["material"]["model"]].fluid or not FORMULATIONS[body["formulation"]["type"]].damage):
             raise InputError(f"material.{model.key}: damage is for solids computed at the particles "
                              f"(tlsph, ulsph, sph, rlm), not for model '{body['material']['model']}' with "
                              f"formulation '{body['formulation']['type']}'")
-    for body in bodies(scene):
+    for body in _bodies(scene):
         mat = body["material"]
         if mat["break_pairs"] and not failure_of(mat):
             raise InputError("material.break_pairs needs a failure model (material.failure_strain or jc_d1)")
         if not mat["break_pairs"]:  # absent, as in scenes written before the key existed
             del mat["break_pairs"]
-    if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in bodies(scene)):
+    if scene["symmetry"] and any(body["formulation"]["hessian"] > 0 for body in _bodies(scene)):
         raise InputError(
             "[[symmetry]] planes cannot be used with formulation.hessian > 0: the Hessian term of "
             "[V eq. 17] (h = (l, l, l)) is not symmetric under reflection, so mirror images do not "
             "continue the body; hold the planes' normal components with [[bc]] type = 'fixed' instead")
-    for b, body in enumerate(bodies(scene)):
+    for b, body in enumerate(_bodies(scene)):
         FORMULATIONS[body["formulation"]["type"]].check_body(body, f"bodies[{b}]" if multi else "geometry", scene)
     if "contact" in raw:
         scene["contact"] = _validate_contact(raw["contact"], scene, dim)
@@ -941,14 +987,14 @@ def validate(raw: dict) -> dict:
         entries = [_table(f"ties[{i}]", t, TIE_KEYS, dim) for i, t in enumerate(_array("ties", raw["ties"]))]
         for i, entry in enumerate(entries):
             _body_pair(f"ties[{i}]", entry["bodies"], scene)
-        scene["ties"] = ties.check(entries, scene, bodies(scene), moves)
+        scene["ties"] = ties.check(entries, scene["symmetry"], _bodies(scene), moves)
     scene["parameters"] = dict(raw.get("parameters", {}))
-    return scene
+    return _typed(scene)
 
 
 def _body_pair(path: str, pair: list, scene: dict) -> None:
     """`path`.bodies (contact, ties) names two bodies of the scene."""
-    names = [b["name"] for b in bodies(scene)] if "bodies" in scene else []
+    names = [b["name"] for b in _bodies(scene)] if "bodies" in scene else []
     if len(pair) != 2:
         raise InputError(f"{path}.bodies must name two bodies, got {pair!r}")
     for name in pair:
@@ -1098,7 +1144,7 @@ def _anchor_files(raw: dict, directory: str) -> None:
     walk(raw.get("surfaces"))
 
 
-def load(path: str, overrides: list[str] = ()) -> dict:
+def load(path: str, overrides: list[str] = ()) -> Scene:
     """Read a scene file, apply `--set` overrides, validate; returns the resolved scene
     (its parts' files found relative to the scene file)."""
     raw = _read(path)
@@ -1108,6 +1154,6 @@ def load(path: str, overrides: list[str] = ()) -> dict:
     return validate(raw)
 
 
-def to_json(scene: dict) -> str:
+def to_json(scene: Scene) -> str:
     """The resolved scene as canonical JSON (stored in every output file)."""
-    return json.dumps(scene, sort_keys=True)
+    return json.dumps(scene._resolved, sort_keys=True)

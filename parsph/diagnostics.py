@@ -99,11 +99,11 @@ def probe_parts(probes: list, sim, reduction: RowReduction):
     Returns the function that gives the probes' values once `reduction` is reduced."""
     where = []
     for probe in probes:
-        sel = sim.group_index(probe["group"])
-        q = sim.quantity(probe["quantity"], sel)
+        sel = sim.group_index(probe.group)
+        q = sim.quantity(probe.quantity, sel)
         if q.ndim == 2:
-            q = np.linalg.norm(q, axis=1) if probe["component"] < 0 else q[:, probe["component"]]
-        how = probe["reduce"]
+            q = np.linalg.norm(q, axis=1) if probe.component < 0 else q[:, probe.component]
+        how = probe.reduce
         if how in ("mean", "sum"):
             where.append(reduction.add_sums([q, Exact(len(q) * SCALE)]))
         elif how == "max":
@@ -114,12 +114,12 @@ def probe_parts(probes: list, sim, reduction: RowReduction):
     def values() -> dict:
         out = {}
         for probe, k in zip(probes, where):
-            how = probe["reduce"]
+            how = probe.reduce
             if how in ("mean", "sum"):
                 value, count = float(reduction.sums[k]), float(reduction.sums[k + 1])
-                out[probe["name"]] = value / count if how == "mean" else value
+                out[probe.name] = value / count if how == "mean" else value
             else:
-                out[probe["name"]] = reduction.maxima[k] if how == "max" else -reduction.maxima[k]
+                out[probe.name] = reduction.maxima[k] if how == "max" else -reduction.maxima[k]
         return out
 
     return values
@@ -327,7 +327,7 @@ def history_row(sim, reduction: RowReduction | None = None) -> dict:
     contact = contact_parts(sim, reduction)
     others = sim.interactions.columns(sim.state, reduction)
     rigid = rigid_parts(sim, reduction)
-    probes = probe_parts(sim.scene["probes"], sim, reduction)
+    probes = probe_parts(sim.scene.probes, sim, reduction)
     reduction.reduce()
     out = {"time": sim.t, "step": float(sim.step_count), "dt": sim.stable.dt,
            "reference_updates": float(sim.topology.count)}

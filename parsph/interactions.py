@@ -41,13 +41,13 @@ class Kind:
     columns: Callable | None = None  # (it, state, diagnostics.RowReduction) -> () -> its history series
 
 
-def _contact(scene: dict, state, ledger, topology):
+def _contact(scene, state, ledger, topology):
     """parsph.contact's bodies in contact, or None."""
-    if not scene.get("contact"):
+    if not scene.contact:
         return None
     from parsph import config  # config imports the interactions' keys
-    return Contact(scene["contact"], state.bodies, state.body, state.measure, state.mass, state.gid, state.n_owned,
-                   state.dim, config.thickness(scene), state.comm, scene["symmetry"], topology)
+    return Contact(scene.contact, state.bodies, state.body, state.measure, state.mass, state.gid, state.n_owned,
+                   state.dim, config.thickness(scene), state.comm, scene.symmetry, topology)
 
 
 KINDS = (
@@ -69,7 +69,7 @@ class Interactions:
     forces are summed. `omega2` is their springs' bound on the squared frequency of the owned
     particles (the stable step)."""
 
-    def __init__(self, scene: dict, state, ledger, topology):
+    def __init__(self, scene, state, ledger, topology):
         self.by_kind = {kind.key: kind.build(scene, state, ledger, topology) for kind in KINDS}
         self.contact, self.ties = self.by_kind["contact"], self.by_kind["ties"]
         self.present = [i for i in self.by_kind.values() if i is not None]

@@ -48,10 +48,10 @@ class KernelRelation:
     with lists `skin` wider (the Skin rule of `length` beyond the reach) and otherwise rebuilt
     on the kept lists. `count`: its reference updates so far, `since`: steps since the last."""
 
-    def __init__(self, index: int, bodies: list, scene_bodies: list, scene: dict, length: float, comm):
+    def __init__(self, index: int, bodies: list, scene_bodies: list, scene: config.Scene, length: float, comm):
         self.index, self.bodies = index, bodies
-        specs = config.bodies(scene)
-        self.kernel = config.kernel_of(scene, specs[bodies[0].index])["type"]
+        specs = scene.bodies
+        self.kernel = config.kernel_of(scene, specs[bodies[0].index]).type
         forms = [b.formulation for b in bodies]
         self.eta = max(f.eta for f in forms)
         self.weighted_hessian = next((f.weighted_hessian for f in forms if f.eta > 0), True)
@@ -60,7 +60,7 @@ class KernelRelation:
         self.eulerian = any(b.formulation.eulerian for b in moving)  # inside every step
         schedule = (moving or bodies)[0]
         self.every, self.strain = schedule.formulation.update_every, schedule.formulation.update_strain
-        kept = specs[schedule.index]["formulation"]
+        kept = specs[schedule.index].formulation
         self.rule = Skin(config.skin(kept) * length, comm, config.search_every(kept))
         self.skin = 0.0  # the skin of the current lists (none at set-up: the first update searches)
         self.count = 0
@@ -107,18 +107,18 @@ class KernelRelation:
         return np.concatenate(rows)
 
 
-def groups(bodies: list, scene: dict) -> list:
+def groups(bodies: list, scene: config.Scene) -> list:
     """The bodies in as few groups as they go (in body order, each body in the first group it
     fits): one kernel type; one eta and hessian_correction among the stabilised bodies; one
     update schedule and list rule among the bodies whose reference moves."""
-    specs = config.bodies(scene)
+    specs = scene.bodies
 
     def key(b):
-        form, spec = b.formulation, specs[b.index]["formulation"]
+        form, spec = b.formulation, specs[b.index].formulation
         stabilised = (form.eta, form.weighted_hessian) if form.eta > 0 else None
         schedule = (form.eulerian, form.update_every, form.update_strain, config.search_every(spec),
                     config.skin(spec)) if b.moves else None
-        return config.kernel_of(scene, specs[b.index])["type"], stabilised, schedule
+        return config.kernel_of(scene, specs[b.index]).type, stabilised, schedule
 
     def fits(a, b):
         return a[0] == b[0] and all(None in (x, y) or x == y for x, y in zip(a[1:], b[1:]))

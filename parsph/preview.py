@@ -42,7 +42,7 @@ def preview(scene_path: str, out_dir: str | None, overrides: list, overwrite: bo
 
     with collective():
         scene = config.load(scene_path, overrides)
-    out_dir = out_dir or os.path.join("results", scene["scene"]["name"], "preview")
+    out_dir = out_dir or os.path.join("results", scene.scene.name, "preview")
     output_dir.lock(out_dir)
     previous = _previous(out_dir, overwrite)
     owned, offsets = build_bodies(scene, COMM)
@@ -82,27 +82,27 @@ def _group_field(name: str) -> str:
     return "group_" + name.replace("/", "_")  # a dataset's name: no "/"
 
 
-def _fields(scene: dict, owned: dict, offsets: np.ndarray) -> dict:
+def _fields(scene: config.Scene, owned: dict, offsets: np.ndarray) -> dict:
     """This rank's rows of the preview's fields (positions padded to 3D)."""
     X = owned["X"]
     values = {"position": np.pad(X, ((0, 0), (0, 3 - X.shape[1]))),
               "body": (np.searchsorted(offsets, owned["gid"], side="right") - 1).astype(np.int32),
               "volume": owned["volume"], "mass": owned["mass"], "support": owned["support"],
               "rank": np.full(len(X), COMM.rank, np.int32)}
-    for k, name in enumerate(sorted(scene["groups"])):
+    for k, name in enumerate(sorted(scene.groups)):
         if name != "all":
             values[_group_field(name)] = np.ascontiguousarray(owned["groups"][:, k])
     return values
 
 
-def _write_particles(out_dir: str, scene: dict, gid: np.ndarray, total: int, values: dict) -> None:
+def _write_particles(out_dir: str, scene: config.Scene, gid: np.ndarray, total: int, values: dict) -> None:
     """Collective: particles.h5 (a snapshot file of one snapshot) and its index particles.xdmf."""
     path = os.path.join(out_dir, "particles.h5")
     with collective():
         with ParticleFile(path, "w", COMM) as out:
             if out.writer:
                 out.file.attrs["scene"] = config.to_json(scene)
-                out.file.attrs["bodies"] = [body["name"] for body in config.bodies(scene)]
+                out.file.attrs["bodies"] = [body.name for body in scene.bodies]
             write_points(out, GROUP, gid, total, values, 0.0, 0, True)
     with collective():
         if COMM.rank == 0:
@@ -113,7 +113,7 @@ def _write_particles(out_dir: str, scene: dict, gid: np.ndarray, total: int, val
                          + point_grid("particles.h5", GROUP, total, fields) + "</Domain>\n</Xdmf>\n")
 
 
-def obstacle_surfaces(scene: dict, X: np.ndarray, t: float = 0.0) -> list:
+def obstacle_surfaces(scene: config.Scene, X: np.ndarray, t: float = 0.0) -> list:
     """[(name, triangles (m, 3, 3))] of the scene's obstacles at time t on rank 0 ([] on
     the others, and in 1D). An obstacle object that has a method triangles(t),
     returning its surface's triangles (m, 3, dimension) at time t, gives its own; a wall
@@ -122,8 +122,8 @@ def obstacle_surfaces(scene: dict, X: np.ndarray, t: float = 0.0) -> list:
     diagonal; a tool is its box with rounded edges. Collective."""
     from parsph.walls import Tool, Wall, Walls
 
-    dim = scene["scene"]["dimension"]
-    obstacles = Walls(scene["walls"], scene["tools"], dim, scene["surfaces"], scene["parameters"])
+    dim = scene.scene.dimension
+    obstacles = Walls(scene.walls, scene.tools, dim, scene.surfaces, scene.parameters)
     boxes = [box for box in COMM.allgather((X.min(axis=0), X.max(axis=0)) if len(X) else None) if box]
     lower, upper = np.min([lo for lo, _ in boxes], axis=0), np.max([hi for _, hi in boxes], axis=0)
     if COMM.rank != 0 or dim == 1:
@@ -210,7 +210,7 @@ def _write_obstacles(path: str, surfaces: list) -> None:
     meshio.write(path, meshio.Mesh(points, [("triangle", cells)], cell_data={"obstacle": [index]}))
 
 
-def _plot(out_dir: str, scene: dict) -> str | None:
+def _plot(out_dir: str, scene: config.Scene) -> str | None:
     """particles.png: the particles coloured by body (in 1D their volumes along x; rank 0;
     None without matplotlib)."""
     from parsph.io.plots import plot_snapshots
@@ -220,25 +220,25 @@ def _plot(out_dir: str, scene: dict) -> str | None:
         return None
     with collective():
         if COMM.rank == 0:
-            bodies = len(config.bodies(scene))
-            field, limits = ("volume", None) if scene["scene"]["dimension"] == 1 else ("body", (0, max(bodies - 1, 1)))
+            bodies = len(scene.bodies)
+            field, limits = ("volume", None) if scene.scene.dimension == 1 else ("body", (0, max(bodies - 1, 1)))
             plot_snapshots(os.path.join(out_dir, "particles.h5"), field, 1, os.path.join(out_dir, "particles.png"),
                            limits)
     return os.path.join(out_dir, "particles.png")
 
 
-def _summary(scene: dict, out_dir: str, owned: dict, offsets: np.ndarray, values: dict, surfaces: list,
+def _summary(scene: config.Scene, out_dir: str, owned: dict, offsets: np.ndarray, values: dict, surfaces: list,
              picture: str | None) -> None:
     """Per body its particles, volume and mass, per group its particles, the obstacles and
     the files (rank 0 prints; exact sums: the same on any rank count)."""
-    names = [body["name"] for body in config.bodies(scene)]
+    names = [body.name for body in scene.bodies]
     body = values["body"]
     counts = COMM.allreduce(np.bincount(body, minlength=len(names)))
     sums = allsum(COMM, totals([values[k][body == b] for b in range(len(names)) for k in ("volume", "mass")]))
-    groups = [name for name in sorted(scene["groups"]) if name != "all"]
+    groups = [name for name in sorted(scene.groups) if name != "all"]
     members = COMM.allreduce(np.array([int(values[_group_field(g)].sum()) for g in groups], np.int64))
-    say(f"parsph: preview of scene '{scene['scene']['name']}': {_particles(offsets[-1])}, "
-        f"{scene['scene']['dimension']}D, {COMM.size} rank(s), in {out_dir}")
+    say(f"parsph: preview of scene '{scene.scene.name}': {_particles(offsets[-1])}, "
+        f"{scene.scene.dimension}D, {COMM.size} rank(s), in {out_dir}")
     for b, name in enumerate(names):
         say(f"  body {b} '{name}': {_particles(counts[b])}, volume {float(sums[2 * b]):.6g} m^3, "
             f"mass {float(sums[2 * b + 1]):.6g} kg")

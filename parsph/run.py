@@ -75,7 +75,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
     particle set; the blocks are partitioned among the ranks by position."""
     with collective():
         scene = config.load(scene_path, overrides)
-    out_dir = out_dir or os.path.join("results", scene["scene"]["name"])
+    out_dir = out_dir or os.path.join("results", scene.scene.name)
     from parsph.build import build_local
     from parsph.parallel.decomposition import localize
 
@@ -90,7 +90,7 @@ def _setup(scene_path, out_dir, overrides, overwrite, restart):
         if COMM.rank == 0:
             previous = other_run(out_dir, data["scene"], data["path"], overwrite)
             if not previous:
-                check_resumable(scene, out_dir)
+                check_resumable(scene.time, out_dir)
     fields = data.pop("fields")
     position = "Xr" if "Xr" in fields else "X"
     local = localize(fields, data.pop("sets"), position, COMM)
@@ -122,16 +122,16 @@ def other_run(out_dir: str, checkpoint_scene: dict, checkpoint_path: str, overwr
     return [p for p in output_dir.run_files(out_dir) if os.path.realpath(p) != keep]
 
 
-def check_resumable(scene: dict, out_dir: str) -> None:
+def check_resumable(settings, out_dir: str) -> None:
     """Refuse, before anything is changed, a restart whose history or snapshots in `out_dir`
-    are damaged, or that would stop before the end of what `out_dir` already holds (it
-    would cut the history and snapshots written after its end)."""
+    are damaged, or that would stop before the end (the scene's [time] `settings`) of what
+    `out_dir` already holds (it would cut the history and snapshots written after its end)."""
     reached = read_reached(os.path.join(out_dir, "history.h5"))
     check_snapshots_readable(os.path.join(out_dir, "snapshots.h5"))
     if reached is None:
         return
     t_last, step_last = reached
-    end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
+    end, max_steps = settings.end, settings.max_steps
     if end < t_last * (1 - 1e-12) or (max_steps and max_steps < step_last):
         raise InputError(
             f"{out_dir} already holds the run to step {step_last}, t = {t_last:.6g} s; a restart that "
@@ -159,7 +159,7 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     scene, out_dir, previous, local, data = _setup(scene_path, out_dir, overrides, overwrite, restart)
     from parsph.simulation import Simulation
 
-    name = scene["scene"]["name"]
+    name = scene.scene.name
     scene_json = config.to_json(scene)
     start = time.perf_counter()
     count = local.total
@@ -167,14 +167,14 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
     del local
     setup_seconds = time.perf_counter() - start
     output_dir.claim_output(out_dir, previous)
-    say(f"parsph: scene '{name}': {count} particles, {scene['scene']['dimension']}D, "
+    say(f"parsph: scene '{name}': {count} particles, {scene.scene.dimension}D, "
         f"{COMM.size} rank(s), set-up {setup_seconds:.2f} s, output in {out_dir}")
 
     outputs = Outputs(sim, scene, scene_json, out_dir, data, debug)
-    end, max_steps = scene["time"]["end"], scene["time"]["max_steps"]
-    progress = Progress(end, max_steps, count, scene["output"]["progress_seconds"],
+    end, max_steps = scene.time.end, scene.time.max_steps
+    progress = Progress(end, max_steps, count, scene.output.progress_seconds,
                         enabled=COMM.rank == 0 and not quiet)
-    stop = StopRequest(scene["time"]["wall_limit"])
+    stop = StopRequest(scene.time.wall_limit)
     sim.stage_seconds.clear()  # the set-up's force evaluation (and compilation) is not a step
     loop_start = time.perf_counter()
     steps_at_start = sim.step_count

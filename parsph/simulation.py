@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from parsph import config, readouts
+from parsph import readouts
 from parsph.bc import apply_initial_conditions
 from parsph.conditions import Conditions
 from parsph.diagnostics import history_row
@@ -41,35 +41,35 @@ from parsph.walls import Walls
 class Simulation:
     """The particles this rank owns, of every body, and the loop that steps them."""
 
-    def __init__(self, scene: dict, local: LocalBody, comm, restart: dict | None = None):
+    def __init__(self, scene, local: LocalBody, comm, restart: dict | None = None):
         """Set up this rank's particles `local` (build.build_local, or a checkpoint's block
         partitioned); `restart` (io.checkpoint.load: clock and totals) continues a run."""
         self.scene = scene
         self.comm = comm
-        dim = scene["scene"]["dimension"]
+        dim = scene.scene.dimension
         offsets = np.asarray(local.offsets if local.offsets is not None else [0, local.total], np.int64)
         bodies = [Body(b, spec, int(offsets[b]), int(offsets[b + 1]), dim)
-                  for b, spec in enumerate(config.bodies(scene))]
+                  for b, spec in enumerate(scene.bodies)]
         # the step allowed by the particles' motion is limited by contact and surfaces (and viscosity)
-        limited = bool(scene.get("contact") or scene.get("surfaces"))
-        self.state = state = RankState(bodies, dim, comm, sorted(scene["groups"]), limited)
+        limited = bool(scene.contact or scene.surfaces)
+        self.state = state = RankState(bodies, dim, comm, sorted(scene.groups), limited)
         state.offsets = offsets
         self.failure = Failure(bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, bodies, local, comm)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
         self.ledger = Ledger(bodies)
-        self.stable = StableStep(scene["time"])
+        self.stable = StableStep(scene.time)
         # the clock, and what the stages read while the run goes (formulations.base.Running)
         self.running = Running(self.ledger, self.stable, restart["clock"]["t"] if restart else 0.0)
-        self.walls = Walls(scene["walls"], scene["tools"], dim, scene["surfaces"], scene["parameters"])
+        self.walls = Walls(scene.walls, scene.tools, dim, scene.surfaces, scene.parameters)
         self.conditions = Conditions(scene)
         self.adopt(local)
         check_hourglass_stiffness(state, self.topology)
         n = state.n_owned
         if restart is None:
             with collective(comm):
-                apply_initial_conditions(scene["initial"], state.groups, state.X[:n], state.gid[:n], state.u[:n],
-                                         state.v[:n], scene["parameters"])
+                apply_initial_conditions(scene.initial, state.groups, state.X[:n], state.gid[:n], state.u[:n],
+                                         state.v[:n], scene.parameters)
             self.conditions.prescribe_displacement(state, 0.0)
             self.conditions.prescribe_velocity(state, 0.0)
         self.conditions.free_rigid_bodies(state, restart)
@@ -102,7 +102,7 @@ class Simulation:
         updated = state.updated and "Xr" in local.fields
         ref = ("Xr", "measure_r", "volume_r") if updated else ("X", "measure", "volume")
         with collective(comm):
-            local, mirrors = add_images(local, ref[0], scene["symmetry"], comm,
+            local, mirrors = add_images(local, ref[0], scene.symmetry, comm,
                                         skin=self.topology.skin if state.updated else 0.0)
             fl, n = local.fields, local.n_owned
             # layer 2 kept to rebuild the ghosts' rows between searches, or when pairs break
@@ -112,7 +112,7 @@ class Simulation:
             body = np.searchsorted(state.offsets, local.gid % local.total, side="right") - 1
             self.failure.detached = self.failure.failed(fl.get("damage"), body)
             cut = self.failure.known_cut(fl[ref[0]], fl[ref[1]], fl["support"], local.gid, n, self.failure.detached,
-                                         len(scene["symmetry"]), local.total)
+                                         len(scene.symmetry), local.total)
             self.topology.build(Configuration(fl[ref[0]], fl[ref[1]], fl[ref[2]], fl["support"], local.gid, body, n,
                                               decomp.n_rows), detached=self.failure.detached, cut=cut)
         if not layer2:
@@ -305,7 +305,7 @@ class Simulation:
         """Pairs of newly failed particles break (failure.Failure.break_pairs) and the forces
         are evaluated on the new pairs, twice where a plastic body keeps its elastic state
         through the change of F; the change does no work (failure.Failure.settle)."""
-        broken = self.failure.break_pairs(self.state, self.topology, len(self.scene["symmetry"]))
+        broken = self.failure.break_pairs(self.state, self.topology, len(self.scene.symmetry))
         if broken is None:
             return
         self.compute_forces()

@@ -33,13 +33,13 @@ class StableStep:
         """The first step's size, or the checkpoint's `clock` (collective); the arguments as
         for limit."""
         settings = self.settings
-        if settings["dt"] > 0:
-            self.cfl_at = (settings["cfl"] * self.limit(state, topology, interactions, step, t)[0], step)
+        if settings.dt > 0:
+            self.cfl_at = (settings.cfl * self.limit(state, topology, interactions, step, t)[0], step)
         self.dt = clock["dt"] if clock else self.next_step(state, topology, interactions, step, t)[0]
         self.first = clock.get("first_stable", 0.0) if clock else self.limit(state, topology, interactions, step, t)[0]
-        self.floor = settings["step_floor"] * self.first if self.first < math.inf else 0.0
+        self.floor = settings.step_floor * self.first if self.first < math.inf else 0.0
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
-        self.bound_hourglass = settings["dt"] == 0 or (state.updated and topology.adaptive)
+        self.bound_hourglass = settings.dt == 0 or (state.updated and topology.adaptive)
 
     def next_step(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(size of the next step, each kernel relation's largest incremental log strain):
@@ -47,11 +47,11 @@ class StableStep:
         reference update (0 unless it is enabled); the arguments as for limit. Collective."""
         settings = self.settings
         adaptive = state.updated and topology.adaptive
-        if settings["dt"] > 0:
-            return settings["dt"], self.limit(state, topology, interactions, step, t)[1] if adaptive else \
+        if settings.dt > 0:
+            return settings.dt, self.limit(state, topology, interactions, step, t)[1] if adaptive else \
                 np.zeros(len(topology.relations))
         size, strains = self.limit(state, topology, interactions, step, t)
-        return settings["cfl"] * size, strains
+        return settings.cfl * size, strains
 
     def limit(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(stable step, each kernel relation's largest incremental log strain) over all
@@ -76,7 +76,7 @@ class StableStep:
         reduced = np.array([-dt, *strains])
         if state.comm.size > 1:
             state.comm.Allreduce(MPI.IN_PLACE, reduced, op=MPI.MAX)
-        if -reduced[0] == math.inf and self.settings["dt"] > 0:  # nothing bounds a fixed step: it is the user's
+        if -reduced[0] == math.inf and self.settings.dt > 0:  # nothing bounds a fixed step: it is the user's
             return math.inf, reduced[1:]
         if -reduced[0] == math.inf:
             why = ("every body is rigid and none touches another: give time.dt" if all(b.rigid for b in state.bodies)
@@ -118,7 +118,7 @@ class StableStep:
         if not size > 0.0:
             what = "collapsed to zero"
         else:
-            what = (f"fell to {size:.3g} s, below time.step_floor = {self.settings['step_floor']:g} of the first "
+            what = (f"fell to {size:.3g} s, below time.step_floor = {self.settings.step_floor:g} of the first "
                     f"one ({self.first:.3g} s),")
         names = [b.name for b in state.bodies]
         if speed is not None:
@@ -142,7 +142,7 @@ class StableStep:
 
     def advice(self) -> str:
         """What to change when the run has become unstable."""
-        dt = self.settings["dt"]
+        dt = self.settings.dt
         if dt == 0:
             return "reduce time.cfl, raise formulation.hourglass or refine the particles"
         cfl = "" if self.cfl_at is None or self.cfl_at[0] == math.inf else \

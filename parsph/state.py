@@ -30,17 +30,17 @@ class Body:
     constants, its formulation; lo..hi-1 are its owned rows on this rank."""
 
     def __init__(self, index: int, spec: dict, first: int, last: int, dim: int):
-        self.index, self.name = index, spec["name"]
+        self.index, self.name = index, spec.name
         self.first, self.last = first, last
-        self.law = materials.LAWS[spec["material"]["model"]]
-        self.constants = materials.constants(spec["material"])
-        failure = materials.failure_of(spec["material"])  # materials.FAILURES: damage, johnson_cook_failure
+        self.law = materials.LAWS[spec.material.model]
+        self.constants = materials.constants(spec.material)
+        failure = materials.failure_of(spec.material)  # materials.FAILURES: damage, johnson_cook_failure
         self.failure = failure.failure_id if failure else 0  # 0: none
-        self.failure_strain = spec["material"]["failure_strain"]  # tensile damage's
-        self.rigid = spec.get("rigid", False)  # no stress: moves as one rigid body (parsph.rigid)
-        self.breaks_pairs = spec["material"].get("break_pairs", False)  # a failed particle loses its pairs
-        self.density = spec["material"]["density"]
-        self.formulation = FORMULATIONS[spec["formulation"]["type"]](spec["formulation"], dim, self.law.law_id,
+        self.failure_strain = spec.material.failure_strain  # tensile damage's
+        self.rigid = spec.rigid  # no stress: moves as one rigid body (parsph.rigid)
+        self.breaks_pairs = spec.material.break_pairs  # a failed particle loses its pairs
+        self.density = spec.material.density
+        self.formulation = FORMULATIONS[spec.formulation.type](spec.formulation, dim, self.law.law_id,
                                                                      failure=self.failure)
         self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0

@@ -150,20 +150,20 @@ class Surface:
     """A rigid surface with prescribed motion, the contact geometry of its held triangles."""
 
     def __init__(self, spec: dict, dim: int, parameters: dict, where: str):
-        self.group = spec["group"]
+        self.group = spec.group
         self.index = np.zeros(0, np.int64)
         self.dim = dim
-        V, self.F = read(spec["file"], f"{where}.file", dim)
-        rotate = spec["rotate"] if spec["rotate"] is not None else [0.0] * (1 if dim == 2 else 3)
-        self.V = (spec["scale"] * V) @ _rotation(rotate, dim).T + np.asarray(spec["translate"] or [0.0] * dim)
+        V, self.F = read(spec.file, f"{where}.file", dim)
+        rotate = spec.rotate if spec.rotate is not None else [0.0] * (1 if dim == 2 else 3)
+        self.V = (spec.scale * V) @ _rotation(rotate, dim).T + np.asarray(spec.translate or [0.0] * dim)
         lo, hi = self.V.min(axis=0), self.V.max(axis=0)
-        self.center0 = np.asarray(spec["center"], float) if spec["center"] is not None else 0.5 * (lo + hi)
+        self.center0 = np.asarray(spec.center, float) if spec.center is not None else 0.5 * (lo + hi)
         self.margin = MARGIN * float(np.linalg.norm(hi - lo))
-        self.friction = spec["friction"]
-        self.velocity_of = _Rate(f"{where}.velocity_expression", spec["velocity"], spec["velocity_expression"],
+        self.friction = spec.friction
+        self.velocity_of = _Rate(f"{where}.velocity_expression", spec.velocity, spec.velocity_expression,
                                  parameters, dim)
-        self.omega_of = _Rate(f"{where}.angular_velocity_expression", spec["angular_velocity"],
-                              spec["angular_velocity_expression"], parameters, 1 if dim == 2 else 3)
+        self.omega_of = _Rate(f"{where}.angular_velocity_expression", spec.angular_velocity,
+                              spec.angular_velocity_expression, parameters, 1 if dim == 2 else 3)
         self.held = None  # the box (surface frame) whose points see every triangle within margin / 2
         self._pose = (None, None)
 

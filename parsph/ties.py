@@ -78,7 +78,7 @@ RUNNING = ("tie_released",  # the tie energy broken ties released
            "tie_work")  # absorbed by the ties' dashpots
 
 
-def check(entries: list, scene: dict, bodies: list, moves) -> list:
+def check(entries: list, symmetry: list, bodies: list, moves) -> list:
     """The validated [[ties]] tables (`entries`, keys filled in, each naming two bodies of the
     scene: config): distinct bodies (`bodies`, resolved), total-Lagrangian (`moves(body)`
     false) and not rigid, every pair once, no symmetry planes."""
@@ -98,7 +98,7 @@ def check(entries: list, scene: dict, bodies: list, moves) -> list:
                 what = "rigid" if body.get("rigid", False) else "of an updated reference"
                 raise InputError(f"{path}.bodies: body '{name}' is {what}; ties join total-Lagrangian bodies "
                                  "(their partners are found once in the reference)")
-    if entries and scene["symmetry"]:
+    if entries and symmetry:
         raise InputError("[[ties]] with [[symmetry]] planes is not supported: the mirror images are not tied; "
                          "model both sides")
     return entries
@@ -116,11 +116,11 @@ class Ties:
         ledger books the work of the ties' damping (collective)."""
         n, dim, comm = state.n_owned, state.dim, state.comm
         index = {b.name: b.index for b in state.bodies}
-        self.entries = [(index[s["bodies"][0]], index[s["bodies"][1]]) for s in specs]
+        self.entries = [(index[s.bodies[0]], index[s.bodies[1]]) for s in specs]
         self.labels = [f"{s['bodies'][0]}.{s['bodies'][1]}" for s in specs]
         self.n, self.dim, self.comm, self.ledger = n, dim, comm, ledger
         self.u, self.v = state.u, state.v  # the local rows, the ghosts refreshed by the halo
-        self.zeta = np.array([s["damping"] for s in specs])
+        self.zeta = np.array([s.damping for s in specs])
         self.dissipative = bool((self.zeta > 0).any())
         self.reads = ("d", "v") if self.dissipative else ("d",)  # total-Lagrangian: d is u
         rows = len(state.X)
@@ -131,7 +131,7 @@ class Ties:
         reach = comm.allreduce(float(state.support[:n].max()) if n else 0.0, op=MPI.MAX)  # add_ghosts'
         self.distance = []
         for k, (s, (a, b)) in enumerate(zip(specs, self.entries)):
-            d = s["distance"] or min(SPACINGS * max(largest[a], largest[b]), reach)
+            d = s.distance or min(SPACINGS * max(largest[a], largest[b]), reach)
             if d > reach:
                 error = InputError(f"ties[{k}].distance = {d:g} m exceeds the halo's reach, the largest kernel "
                                    f"support {reach:g} m: give at most that, or a larger kernel.support")
@@ -180,12 +180,12 @@ class Ties:
         c = [b.constants for b in state.bodies]
         M = np.array([x.lam + 2.0 * x.mu for x in c])[state.body]
         G = np.array([x.mu for x in c])[state.body]
-        factor = np.array([s["stiffness"] for s in specs])[self.entry] if len(specs) else np.zeros(0)
+        factor = np.array([s.stiffness for s in specs])[self.entry] if len(specs) else np.zeros(0)
         self.k_n = factor * 2.0 / (gap * (1.0 / M[p] + 1.0 / M[q]))
         self.k_t = np.where((G[p] > 0) & (G[q] > 0), factor * 2.0 / (gap * (1.0 / np.where(G[p] > 0, G[p], 1.0)
                                                                               + 1.0 / np.where(G[q] > 0, G[q], 1.0))),
                             0.0)
-        strength = np.array([[s["normal_strength"], s["shear_strength"]] for s in specs]).reshape(-1, 2)
+        strength = np.array([[s.normal_strength, s.shear_strength] for s in specs]).reshape(-1, 2)
         self.strength = strength[self.entry]
         self.reduced = state.mass[p] * state.mass[q] / (state.mass[p] + state.mass[q])
         self.broken = np.zeros(len(j), np.bool_)
@@ -245,12 +245,12 @@ def columns(ties, state, reduction):
     return values
 
 
-def build(scene: dict, state, ledger, topology) -> Ties | None:
+def build(scene, state, ledger, topology) -> Ties | None:
     """The ties of the scene's [[ties]], or None."""
-    if not scene.get("ties"):
+    if not scene.ties:
         return None
     from parsph import config  # config imports the ties' keys
-    return Ties(scene["ties"], state, ledger, config.thickness(scene))
+    return Ties(scene.ties, state, ledger, config.thickness(scene))
 
 
 @njit(cache=True, _nrt=False)

@@ -29,11 +29,11 @@ class Topology:
     """The kernel relations of the bodies, each with its own kernel, stabilisation, update
     schedule, list rule and updates so far (kernel_relation.KernelRelation)."""
 
-    def __init__(self, scene: dict, bodies: list, local, comm):
+    def __init__(self, scene, bodies: list, local, comm):
         length = reach(local.fields["support"][: local.n_owned], comm)
         self.relations = [KernelRelation(k, group, bodies, scene, length, comm)
                           for k, group in enumerate(groups(bodies, scene))]
-        self.rebalance = scene["parallel"]["rebalance"]  # the work imbalance that repartitions
+        self.rebalance = scene.parallel.rebalance  # the work imbalance that repartitions
         self.builds = 0  # the builds of the relations' reference data so far (a self-contact's cue)
 
     @property

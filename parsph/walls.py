@@ -33,14 +33,14 @@ class Wall:
     """A moving plane, optionally acting only inside a box of current positions."""
 
     def __init__(self, spec: dict):
-        self.group = spec["group"]  # the particles that can touch it
+        self.group = spec.group  # the particles that can touch it
         self.index = np.zeros(0, np.int64)  # of them, the owned ones (Walls.select)
-        self.point = np.asarray(spec["point"], float)
-        normal = np.asarray(spec["normal"], float)
+        self.point = np.asarray(spec.point, float)
+        normal = np.asarray(spec.normal, float)
         self.normal = normal / np.linalg.norm(normal)  # unit, into the material
-        self.velocity = np.asarray(spec["velocity"], float)
-        self.lower = None if spec["lower"] is None else np.asarray(spec["lower"], float)
-        self.upper = None if spec["upper"] is None else np.asarray(spec["upper"], float)
+        self.velocity = np.asarray(spec.velocity, float)
+        self.lower = None if spec.lower is None else np.asarray(spec.lower, float)
+        self.upper = None if spec.upper is None else np.asarray(spec.upper, float)
 
     def contact(self, x: np.ndarray, t: float) -> tuple:
         """(signed gaps, unit normals into the material) of the points x; gap < 0 inside."""
@@ -56,13 +56,13 @@ class Tool:
     shrunk by r on every side."""
 
     def __init__(self, spec: dict):
-        self.group = spec["group"]
+        self.group = spec.group
         self.index = np.zeros(0, np.int64)
-        lower, upper = np.asarray(spec["lower"], float), np.asarray(spec["upper"], float)
+        lower, upper = np.asarray(spec.lower, float), np.asarray(spec.upper, float)
         self.center = 0.5 * (lower + upper)
-        self.radius = float(spec["radius"])
+        self.radius = float(spec.radius)
         self.core = 0.5 * (upper - lower) - self.radius  # half-sizes of the shrunk box
-        self.velocity = np.asarray(spec["velocity"], float)
+        self.velocity = np.asarray(spec.velocity, float)
 
     def contact(self, x: np.ndarray, t: float) -> tuple:
         rel = x - (self.center + self.velocity * t)

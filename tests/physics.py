@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 from mpi4py import MPI
 
+from parsph import config
 from parsph.api import build, load_scene
 from parsph.simulation import Simulation
 
@@ -16,6 +17,13 @@ from conftest import RUNS
 def scene_from(name_or_text: str, overrides=()) -> dict:
     """Resolved scene from runs/NAME.toml or from TOML text, with `--set`-style overrides."""
     return load_scene(name_or_text if "\n" in name_or_text else RUNS / f"{name_or_text}.toml", overrides)
+
+
+def typed(name: str, **keys):
+    """The typed scene section `name` ("time", "balance", ...) or entry of the array of
+    tables `name` ("walls", "tools", "tractions", ...) with `keys`, the others at their
+    defaults (config.SECTION_TYPES, config.ENTRY_TYPES)."""
+    return (config.SECTION_TYPES.get(name) or config.ENTRY_TYPES[name]).of(keys)
 
 
 def simulation(name_or_text: str, overrides=(), comm=MPI.COMM_SELF) -> Simulation:

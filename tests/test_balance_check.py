@@ -16,10 +16,10 @@ from conftest import BAR, RUNS, parsph
 from parsph.balance_check import BalanceCheck
 from parsph.errors import ParsphError
 from parsph.io import read_history
-from physics import run_until, simulation
+from physics import run_until, simulation, typed
 
 RANKS = [1, pytest.param(2, marks=pytest.mark.mpi)]
-SETTINGS = {"energy": None, "momentum": 1e-3, "strict": False}
+SETTINGS = typed("balance", energy=None, momentum=1e-3, strict=False)
 
 
 def row(step: int, kinetic: float, strain: float, px: float = 0.0) -> dict:
@@ -44,7 +44,7 @@ def test_the_check_warns_once_naming_the_term_that_grew_and_strict_stops():
     assert later.check(row(40, 4.0, 7.5)) == [] and later.messages == warned
     momentum = check.check(row(50, 4.0, 6.0, px=0.1))  # sqrt(2 M E) = 6.3: 1.6 %
     assert len(momentum) == 1 and "momentum_defect_x" in momentum[0]
-    strict = BalanceCheck(dict(SETTINGS, strict=True), 2, 2.0, [0, 1], True, True)
+    strict = BalanceCheck(typed("balance", energy=None, momentum=1e-3, strict=True), 2, 2.0, [0, 1], True, True)
     strict.check(row(0, 10.0, 0.0))
     with pytest.raises(ParsphError, match="the energy balance is off by"):
         strict.check(row(10, 10.0, 1.0))

@@ -332,7 +332,7 @@ BAD_INPUT = {
 def test_the_scenes_the_cases_edit_are_valid(text):
     from parsph.api import load_scene
 
-    assert load_scene(text)["scene"]["name"]
+    assert load_scene(text).scene.name
 
 
 def assert_bad_input(proc, expect: list[str]) -> None:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from parsph.walls import Walls
-from physics import block_2d, simulation
+from physics import block_2d, simulation, typed
 
 
 def test_tool_puts_particles_on_its_rounded_surface_and_keeps_their_tangential_velocity():
@@ -15,7 +15,7 @@ def test_tool_puts_particles_on_its_rounded_surface_and_keeps_their_tangential_v
     just inside the bottom face goes to the face, one inside the rounded lower-left edge goes
     radially onto the arc; each keeps its tangential velocity and takes the tool's normal
     velocity; a particle outside is left alone."""
-    spec = {"group": "all", "lower": [0.0, 0.0], "upper": [2.0, 1.0], "radius": 0.25, "velocity": [0.0, -1.0]}
+    spec = typed("tools", group="all", lower=[0.0, 0.0], upper=[2.0, 1.0], radius=0.25, velocity=[0.0, -1.0])
     walls = Walls([], [spec], 2)
     walls.select({"all": np.ones(3, bool)})
     center = np.array([0.25, -0.25])  # the arc's centre at t = 0.5

@@ -217,7 +217,7 @@ def test_bar1d_follows_the_analytic_bar(method):
 ])
 def test_options_the_galerkin_methods_cannot_take_are_refused(method, override, message):
     text = block_2d().replace("hourglass = 0.0\n", "")
-    assert scene_from(text, METHODS[method])["formulation"]["hourglass"] == 0.0
+    assert scene_from(text, METHODS[method]).formulation.hourglass == 0.0
     if method == "efg_nodal" and "placement" in override:  # nodal integration takes any particles
         assert scene_from(text, [*METHODS[method], override])
         return
@@ -242,7 +242,7 @@ def test_stress_and_gauss_points_need_one_box_nodal_efg_takes_any_set_and_symmet
     for method in ("kbm", "efg_cells"):  # their stress and Gauss points have no mirror images
         with pytest.raises(InputError, match="symmetry.*no mirror images"):
             scene_from(text, METHODS[method])
-    assert scene_from(text, METHODS["efg_nodal"])["symmetry"]  # tests/test_symmetry.py: as the whole body
+    assert scene_from(text, METHODS["efg_nodal"]).symmetry  # tests/test_symmetry.py: as the whole body
 
 
 @pytest.mark.mpi

@@ -119,7 +119,7 @@ def test_copper_rod_impact_keeps_the_balance_with_its_heat():
     owned = np.arange(sim.state.n_owned)
     work, temperature = sim.quantity("plastic_work", owned), sim.quantity("temperature", owned)
     heat = COPPER["taylor_quinney"] / (COPPER["density"] * COPPER["specific_heat"])
-    room = sim.scene["material"]["room_temperature"]
+    room = sim.scene.material.room_temperature
     assert np.allclose(temperature, room + heat * work, rtol=1e-14, atol=0.0)
     assert 100.0 < temperature.max() - room < 500.0  # measured 265 K at 50 layers
     shortened = {}

@@ -155,7 +155,7 @@ def test_scenes_from_before_the_new_keys_restart():
     bc.duration existed (those keys absent) is the same scene as today's resolution of it."""
     from parsph.io.checkpoint import differing_keys
 
-    new = scene_from(block_2d() + TENSION.replace("[[tractions]]", "[[ignored]]").split("[[ignored]]")[0])
+    new = scene_from(block_2d() + TENSION.replace("[[tractions]]", "[[ignored]]").split("[[ignored]]")[0]).as_dict()
     old = {k: v for k, v in new.items() if k != "tractions"}
     old["bc"] = [{k: v for k, v in bc.items() if k != "expression"} for bc in new["bc"]]
     assert "integration" not in new["formulation"] and not {"expression", "duration"} & set(new["bc"][0])

@@ -118,7 +118,7 @@ def test_the_law_takes_its_three_constants_and_no_other():
     from physics import scene_from
 
     text = block_2d(model="mooney_rivlin")
-    assert scene_from(text)["material"]["lambda"] == 1.0e6
+    assert scene_from(text).material.lambda_ == 1.0e6
     with pytest.raises(InputError, match=r"material.youngs_modulus does not apply to model 'mooney_rivlin' "
                                          r"\(it takes c1, c2 and lambda\)"):
         scene_from(text, ["material.youngs_modulus=1e6"])

@@ -211,7 +211,7 @@ def groups_of(path) -> dict:
     """{group: sorted particle gids} of the scene file `path`, built on one rank."""
     scene = config.load(str(path))
     owned, _ = build_bodies(scene, MPI.COMM_SELF)
-    names = sorted(scene["groups"])
+    names = sorted(scene.groups)
     return {name: np.sort(owned["gid"][owned["groups"][:, k] == 1]) for k, name in enumerate(names)}
 
 
@@ -303,7 +303,7 @@ def test_cells_take_only_a_sets_elements_and_vtk_tags_are_sets(tmp_path):
     owned, _ = build_bodies(scene, MPI.COMM_SELF)
     assert len(owned["gid"]) == 16 and owned["X"][:, 0].min() == pytest.approx(2.5, rel=1e-14)  # x index 2..5
     assert owned["volume"].sum() == pytest.approx(16.0, rel=1e-14)
-    assert not owned["groups"][:, sorted(scene["groups"]).index("first")].any()
+    assert not owned["groups"][:, sorted(scene.groups).index("first")].any()
 
 
 def test_an_unknown_set_is_refused_naming_the_file_and_its_sets(tmp_path):
@@ -417,7 +417,7 @@ def test_the_specimen_mesh_tool_writes_the_committed_file(tmp_path):
 def test_the_specimen_scene_builds_its_grips_and_gauge_from_the_mesh():
     scene = config.load(str(ROOT / "runs" / "specimen_mesh.toml"))
     owned, _ = build_bodies(scene, MPI.COMM_SELF)
-    names = sorted(scene["groups"])
+    names = sorted(scene.groups)
     counts = {name: int(owned["groups"][:, k].sum()) for k, name in enumerate(names)}
     assert counts == {"all": 9600, "gauge": 6144, "grip_bottom": 1728, "grip_top": 1728}
     top = owned["groups"][:, names.index("grip_top")] == 1

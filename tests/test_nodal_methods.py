@@ -303,7 +303,7 @@ def test_beam_bending_static_stiffness_sph_reaction_matches_strain_energy_rlm_do
     stiffness = {}
     for ftype in ("sph", "rlm"):
         sim = beam(ftype)
-        rows = run_until(sim, sim.scene["time"]["end"], every=2000)
+        rows = run_until(sim, sim.scene.time.end, every=2000)
         u = rows["tip_displacement_y"][-1]
         assert u == pytest.approx(-1e-4, rel=1e-12)
         assert rows["kinetic_energy"][-1] < 1e-8 * rows["strain_energy"][-1]  # at rest
@@ -376,8 +376,8 @@ def test_options_of_corrected_sph_only_are_refused_for_sph_and_rlm(ftype):
     # accepted without them, with the hourglass coefficient defaulting to 0
     text = block_2d().replace("hourglass = 0.0\n", "")
     assert "hourglass =" not in text
-    assert scene_from(text, [f'formulation.type="{ftype}"'])["formulation"]["hourglass"] == 0.0
-    assert scene_from(text)["formulation"]["hourglass"] == 50.0  # tlsph's default
+    assert scene_from(text, [f'formulation.type="{ftype}"']).formulation.hourglass == 0.0
+    assert scene_from(text).formulation.hourglass == 50.0  # tlsph's default
 
 
 # ----------------------------------------------------------------------------- Eulerian kernel
@@ -414,7 +414,7 @@ def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body
                                              "'efg' with nodal integration"):
             scene_from(block_2d().replace("hourglass = 0.0\n", ""),
                        [f'formulation.type="{ftype}"', 'formulation.kernel="eulerian"', *extra])
-    assert "kernel" not in scene_from(block_2d(), ['formulation.kernel="lagrangian"'])["formulation"]
+    assert "kernel" not in scene_from(block_2d(), ['formulation.kernel="lagrangian"']).as_dict()["formulation"]
     with pytest.raises(InputError, match="search_every applies to kernel = 'eulerian' and type = 'ulsph'"):
         scene_from(block_2d(), ['formulation.type="sph"', "formulation.search_every=10"])
     with pytest.raises(InputError, match="search_every must be > 0"):
@@ -423,7 +423,7 @@ def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body
     for form in (['formulation.type="sph"', 'formulation.kernel="eulerian"'], ["formulation.type='ulsph'",
                                                                              "formulation.update_every=3"]):
         scene = scene_from(text, form)  # with mirror images the lists are kept too
-        assert config.search_every(scene["formulation"]) == 30
+        assert config.search_every(scene.formulation) == 30
     with pytest.raises(InputError, match="all type = 'ulsph' or all kernel = 'eulerian'"):
         scene_from("two_blocks", ['bodies.0.formulation.type="ulsph"', "bodies.0.formulation.update_every=1",
                                   'bodies.1.formulation.kernel="eulerian"'])

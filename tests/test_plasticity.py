@@ -245,7 +245,7 @@ def test_scene_keys_of_plasticity_and_damage_are_checked():
     from physics import scene_from
 
     taylor = ["material.failure_strain=0.1"]
-    assert scene_from("taylor_impact", taylor)["material"]["failure_strain"] == 0.1
+    assert scene_from("taylor_impact", taylor).material.failure_strain == 0.1
     with pytest.raises(InputError, match=r"material.hardening_modulus = -1e\+11 softens faster"):
         scene_from("taylor_impact", ["material.hardening_modulus=-1e11"])
     with pytest.raises(InputError, match="material.yield_stress does not apply to model 'neo_hookean'"):

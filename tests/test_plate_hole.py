@@ -33,7 +33,7 @@ def test_michells_terms_are_free_of_traction_on_the_hole_and_hold_kirschs_field(
 def at_rest(overrides: list):
     """The scene run to its end time (16 / omega), and its last history row."""
     sim = simulation("plate_hole", overrides)
-    rows = run_until(sim, sim.scene["time"]["end"], every=100000)
+    rows = run_until(sim, sim.scene.time.end, every=100000)
     return sim, {k: v[-1] for k, v in rows.items()}
 
 
@@ -71,7 +71,7 @@ def test_the_stress_at_the_hole_is_roarks_concentration_factor():
     sim, last = at_rest(["parameters.n=10"])
     assert last["kinetic_energy"] < 1e-8 * last["strain_energy"]
     f = kirsch_figures(sim.scene, sim.quantity("reference_position"), sim.quantity("cauchy_stress"),
-                       sim.quantity("volume") / sim.scene["geometry"]["thickness"], last["kinetic_energy"],
+                       sim.quantity("volume") / sim.scene.geometry.thickness, last["kinetic_energy"],
                        last["strain_energy"])
     assert f["traction"] == pytest.approx(S, rel=1e-12)
     assert f["nominal"] == pytest.approx(S * 0.1 / 0.08, rel=1e-12)

@@ -4,6 +4,8 @@ directory as `parsph run` treats them."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import h5py
 import meshio
 import numpy as np
@@ -12,6 +14,7 @@ import pytest
 from conftest import RUNS, parsph
 from parsph import preview
 from parsph.walls import Tool
+from physics import typed
 
 SCENES = {"punch": 2, "tensile_failure": 3}  # a 2D scene with a tool, a 3D one of five parts with groups
 RANKS = [pytest.param(1, id="1rank"), pytest.param(2, id="2ranks", marks=pytest.mark.mpi)]
@@ -104,7 +107,7 @@ def test_bad_input_and_an_occupied_output_directory(ranks, tmp_path):
 
 def test_a_tool_is_its_rounded_box():
     """The tool's triangles lie on its surface (Tool.contact's gap 0) and cover its area."""
-    spec = {"group": "all", "lower": [0.0, 0.0, 0.0], "upper": [2.0, 1.0, 0.5], "radius": 0.1, "velocity": [0, 0, 0]}
+    spec = typed("tools", group="all", lower=[0.0, 0.0, 0.0], upper=[2.0, 1.0, 0.5], radius=0.1, velocity=[0, 0, 0])
     tool = Tool(spec)
     triangles = preview.rounded_box(tool.center, tool.core + tool.radius, tool.radius)
     gap, _ = tool.contact(triangles.reshape(-1, 3), 0.0)
@@ -146,6 +149,6 @@ def test_an_obstacle_with_triangles_gives_its_own(monkeypatch):
             self.names.append("surface0")
 
     monkeypatch.setattr(parsph.walls, "Walls", Obstacles)
-    scene = {"scene": {"dimension": 3}, "walls": [], "tools": [], "surfaces": [], "parameters": {}}
+    scene = SimpleNamespace(scene=SimpleNamespace(dimension=3), walls=(), tools=(), surfaces=(), parameters={})
     (name, triangles), = preview.obstacle_surfaces(scene, np.zeros((1, 3)))
     assert name == "surface0" and np.array_equal(triangles, Surface().triangles(0.0))

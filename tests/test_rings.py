@@ -13,7 +13,7 @@ from parsph import readouts
 from parsph.bc import Tractions
 from parsph.geometry import PolarRing
 from parsph.geometry.stress_points import stress_points_of
-from physics import run_until, simulation
+from physics import run_until, simulation, typed
 
 
 def test_polar_ring_counts_and_weights_sum_to_the_annulus():
@@ -33,7 +33,7 @@ def test_polar_ring_counts_and_weights_sum_to_the_annulus():
 
 
 def test_traction_duration_and_decay():
-    spec = dict(group="all", value=[2.0, 0.0], expression=None, ramp=0.0, duration=1.0, decay=0.5, area=3.0)
+    spec = typed("tractions", group="all", value=[2.0, 0.0], ramp=0.0, duration=1.0, decay=0.5, area=3.0)
     loads = Tractions([spec], {"all": np.ones(2, bool)}, np.zeros((2, 2)), np.arange(2), np.ones(2), 1.0, {})
     force = np.zeros((2, 2))
     loads.add(force, 0.25)

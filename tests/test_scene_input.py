@@ -113,7 +113,7 @@ def assert_bad_input(proc, *expect: str) -> None:
 
 def test_base_scene_is_valid():
     scene = validate()
-    assert scene["geometry"]["parts"][0]["spacing"] == 0.25
+    assert scene.geometry.parts[0]["spacing"] == 0.25
 
 
 # ------------------------------------------------------------------ 1. non-finite numbers
@@ -255,11 +255,11 @@ def test_runaway_expression_is_refused(expression):
 def test_bounded_expressions_keep_their_type():
     scene = validate(part(HEAD_2D, shape="random_patch", lower=[0.0, 0.0], upper=[1.0, 1.0],
                           count="= n*n").replace("[material]", "[parameters]\nn = 7\n\n[material]"))
-    count = scene["geometry"]["parts"][0]["count"]
+    count = scene.geometry.parts[0]["count"]
     assert count == 49 and isinstance(count, int)
-    assert validate(SCENE, "material.density== 2**1000 / 2**990")["material"]["density"] == 1024.0
-    assert validate(SCENE, "material.density== 10**-400 + 1")["material"]["density"] == 1.0
-    assert validate(SCENE, "material.density== " + "-" * 290 + "5")["material"]["density"] == 5.0
+    assert validate(SCENE, "material.density== 2**1000 / 2**990").material.density == 1024.0
+    assert validate(SCENE, "material.density== 10**-400 + 1").material.density == 1.0
+    assert validate(SCENE, "material.density== " + "-" * 290 + "5").material.density == 5.0
 
 
 @pytest.mark.timeout(CEILING)

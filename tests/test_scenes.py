@@ -66,7 +66,7 @@ def beam_compliance(n: int, alpha: float, form: str = "variational") -> float:
     the load is ramped over 50 us and the damping's time constant is 4 us)."""
     sim = simulation("beam_bending", [f"parameters.n={n}", f"formulation.hourglass={alpha}",
                                       f'formulation.hourglass_form="{form}"', "time.end=8e-5"])
-    rows = run_until(sim, sim.scene["time"]["end"], every=1000)
+    rows = run_until(sim, sim.scene.time.end, every=1000)
     return -rows["tip_reaction_y"][-1] / 1e-4
 
 

@@ -156,7 +156,7 @@ def test_outline_files_csv_dxf_svg_relative_to_the_scene(tmp_path):
         scene = tmp_path / "s.toml"
         scale = "" if name.endswith("csv") else "\nscale = 0.001"
         scene.write_text(SCENE_2D.format(part=f'shape = "polygon"\nfile = "{name}"\nspacing = 0.0025{scale}'))
-        part = config.load(str(scene))["geometry"]["parts"][0]
+        part = config.load(str(scene)).geometry.parts[0]
         assert part["file"] == str(tmp_path / name)
         check(part, exact)
 

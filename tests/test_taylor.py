@@ -7,8 +7,6 @@ held back."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
@@ -117,8 +115,8 @@ def test_scenes_and_checkpoints_written_with_a_true_or_false_plastic_hourglass_s
     and 'elastic', in a scene and in a checkpoint's stored scene, which a restart compares."""
     for old, new in ((True, "yield_stress"), (False, "elastic")):
         scene = scene_from("taylor_impact", [f"formulation.plastic_hourglass={str(old).lower()}"])
-        assert scene["formulation"]["plastic_hourglass"] == new
-        stored = json.loads(json.dumps(scene))
+        assert scene.formulation.plastic_hourglass == new
+        stored = scene.as_dict()
         stored["formulation"]["plastic_hourglass"] = old  # as a checkpoint written before wrote it
         check_compatible(stored, scene, "checkpoint.h5")
     with pytest.raises(InputError, match="differs from checkpoint checkpoint.h5 in formulation.plastic_hourglass"):

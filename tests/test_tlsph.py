@@ -224,7 +224,7 @@ def test_energy_balance_holds_while_a_prescribed_motion_accelerates_particles():
     kinetic + strain + hourglass - external stays constant throughout (without it the
     balance was off by the tip particles' kinetic energy, 1.4 % of the work)."""
     sim = simulation("beam_bending", ["parameters.n=4", "time.damping=0", "time.end=6e-5"])
-    assert sim.scene["bc"][1]["type"] == "displacement" and sim.scene["bc"][1]["ramp"] == 5e-5
+    assert sim.scene.bc[1].type == "displacement" and sim.scene.bc[1].ramp == 5e-5
     r = run_until(sim, 6e-5)
     work = np.abs(r["external_work"]).max()
     assert work > 0

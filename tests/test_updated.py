@@ -219,7 +219,7 @@ def punch(scene, overrides=()):
     use F (nearest neighbour over the mean of the four nearest: F^r of an updated
     reference can absorb disorder the spacing ratio then misses), and the simulation."""
     sim = simulation(scene, overrides)
-    run_until(sim, sim.scene["time"]["end"], every=1000)
+    run_until(sim, sim.scene.time.end, every=1000)
     depth = -sim.quantity("displacement", sim.group_index("center"))[:, 1].mean()
     x = sim.quantity("position")
     near, _ = cKDTree(x).query(x, 5)

@@ -61,8 +61,8 @@ def displacement(sim: Simulation) -> np.ndarray:
 def errors(sim: Simulation, u_h: np.ndarray | None = None) -> tuple:
     """(L2 error of the displacement u_h over the particles (default: the particle values),
     energy-norm error over the integration points)."""
-    p = sim.scene["parameters"]
-    material = sim.scene["material"]
+    p = sim.scene.parameters
+    material = sim.scene.material
     exact = lambda X: timoshenko_cantilever(X, p["L"], p["D"], material["youngs_modulus"],  # noqa: E731
                                             material["poisson_ratio"], p["P"])
     n = sim.state.n_owned
@@ -84,7 +84,7 @@ def errors(sim: Simulation, u_h: np.ndarray | None = None) -> tuple:
 
 def tip_error(sim: Simulation, u_h: np.ndarray) -> float:
     """Relative error of the tip deflection, the mean vertical displacement of the last column."""
-    p, material = sim.scene["parameters"], sim.scene["material"]
+    p, material = sim.scene.parameters, sim.scene.material
     tip = sim.group_index("tip")
     u, _ = timoshenko_cantilever(sim.state.X[tip], p["L"], p["D"], material["youngs_modulus"],
                                  material["poisson_ratio"], p["P"])
@@ -108,13 +108,13 @@ def run(method: str, n: int) -> dict:
     scene = scene_of(method, n)
     start = time.process_time()
     sim = Simulation(scene, build_local(scene, MPI.COMM_SELF), MPI.COMM_SELF)
-    end = scene["time"]["end"]
+    end = scene.time.end
     while sim.t < end * (1 - 1e-12):
         sim.step(end)
     seconds = time.process_time() - start
     kinetic = float(0.5 * np.sum(sim.state.mass[:sim.state.n_owned, None] * sim.state.v[:sim.state.n_owned] ** 2))
     strain = sim.ledger.local(sim, "strain")
-    row = {"method": method, "n": n, "particles": sim.state.n_owned, "spacing": scene["parameters"]["D"] / n,
+    row = {"method": method, "n": n, "particles": sim.state.n_owned, "spacing": scene.parameters["D"] / n,
            "steps": sim.step_count, "cpu_seconds": seconds, "kinetic_energy": kinetic, "strain_energy": strain,
            "relaxed": bool(kinetic <= REST * strain), "l2": None, "energy": None, "tip": None}
     if row["relaxed"]:

@@ -185,7 +185,7 @@ def timed_run(sim, end, probe=None, every=1, at=None, clip=False):
 
 def beam_case(n, overrides):
     sim = simulation("beam_bending", [f"parameters.n={n}"] + overrides, comm=COMM)
-    seconds, _, _ = timed_run(sim, sim.scene["time"]["end"])
+    seconds, _, _ = timed_run(sim, sim.scene.time.end)
     reaction = -COMM.allreduce(sim.conditions.reaction(sim.state)[sim.group_index("tip"), 1].sum()) / 1e-4
     exact = cantilever_stiffness(100e9, 0.3, 8e-3, 1e-3, 1e-3)
     return sim, seconds, abs(reaction / exact - 1), n
@@ -218,7 +218,7 @@ def gathered(sim):
 def cantilever_case(scene):
     """Dynamic relaxation to rest; {L2 error of u, energy-norm error} [R eq. 71-74]."""
     sim = Simulation(scene, build_local(scene, COMM), COMM)
-    seconds, _, _ = timed_run(sim, scene["time"]["end"], clip=True)
+    seconds, _, _ = timed_run(sim, scene.time.end, clip=True)
     proxy = gathered(sim)
     l2, energy = COMM.bcast(cantilever_errors(proxy) if COMM.rank == 0 else None, root=0)
     return sim, seconds, {"error_l2": l2, "error_energy": energy}
@@ -226,7 +226,7 @@ def cantilever_case(scene):
 
 def rod_times(scene) -> list:
     """The rod's snapshot times: every output.snapshot_interval up to time.end."""
-    interval, end = scene["output"]["snapshot_interval"], scene["time"]["end"]
+    interval, end = scene.output.snapshot_interval, scene.time.end
     return [k * interval for k in range(1, int(round(end / interval)) + 1)]
 
 
@@ -242,10 +242,10 @@ def rod_case(scene):
     try:
         if COMM.rank == 0:
             with open(os.path.join(folder, "scene.json"), "w") as fh:
-                json.dump(scene, fh)
+                json.dump(scene.as_dict(), fh)
         writer = SnapshotWriter(folder, config.to_json(scene), COMM)
         fields = ["position", "velocity", "displacement"]
-        seconds, _, _ = timed_run(sim, scene["time"]["end"], probe=lambda s: writer.write(s, fields),
+        seconds, _, _ = timed_run(sim, scene.time.end, probe=lambda s: writer.write(s, fields),
                                   at=rod_times(scene), clip=True)
         found = COMM.bcast(rod_errors(folder) if COMM.rank == 0 else None, root=0)  # after every write
     finally:

@@ -48,6 +48,7 @@ import scipy.sparse as sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from parsph import config
 from parsph.bc import Tractions
 from parsph.geometry import select
 from parsph.geometry.mesh_parts import MeshPart
@@ -158,17 +159,17 @@ def edge_fit(rho, theta, polar, harmonics: int = FIT_HARMONICS) -> float:
     return float(sum(ci * t[1, 0] for ci, t in zip(c, michell_terms(np.ones(1), np.zeros(1), harmonics))))
 
 
-def kirsch_figures(scene: dict, X: np.ndarray, sigma: np.ndarray, measure: np.ndarray, kinetic: float,
+def kirsch_figures(scene, X: np.ndarray, sigma: np.ndarray, measure: np.ndarray, kinetic: float,
                    strain: float) -> dict:
     """The figures of a run of runs/plate_hole.toml at rest: reference positions X, Cauchy
     stresses sigma and measures (volume / thickness) of the particles, the kinetic and strain
-    energy."""
-    p = scene["parameters"]
+    energy; `scene` resolved (config.Scene)."""
+    p = scene.parameters
     W, a, h = p["W"], p["d"] / 2, p["d"] / p["n"]
-    thickness = scene["geometry"]["thickness"]
-    masks = {name: select(spec, X, measure) for name, spec in scene["groups"].items()}
+    thickness = scene.geometry.thickness
+    masks = {name: select(spec, X, measure) for name, spec in scene.groups.items()}
     force = np.zeros_like(X)
-    Tractions(scene["tractions"], masks, X, np.arange(len(X)), measure, thickness, p).add(force, np.inf)
+    Tractions(scene.tractions, masks, X, np.arange(len(X)), measure, thickness, p).add(force, np.inf)
     load = force[:, 1].sum()
     nominal = load / (thickness * (W / 2 - a))
     rho, theta = np.hypot(*X.T) / a, np.arctan2(X[:, 1], X[:, 0])
@@ -206,15 +207,15 @@ def kirsch_figures(scene: dict, X: np.ndarray, sigma: np.ndarray, measure: np.nd
 
 def kirsch(out: str) -> None:
     with open(os.path.join(out, "scene.json")) as fh:
-        scene = json.load(fh)
+        scene = config.validate(json.load(fh))  # a resolved scene resolves to itself
     last = read_snapshots(out)[-1]
     history = read_history(out)
-    thickness = scene["geometry"]["thickness"]
-    dim = scene["scene"]["dimension"]
+    thickness = scene.geometry.thickness
+    dim = scene.scene.dimension
     f = kirsch_figures(scene, last["reference_position"][:, :dim], last["cauchy_stress"], last["volume"] / thickness,
                        history["kinetic_energy"][-1], history["strain_energy"][-1])
     ktn = f["ktn"]
-    print(f"plate with a hole, d/W = {f['ratio']:.3g}, spacing d/{scene['parameters']['n']:g}, "
+    print(f"plate with a hole, d/W = {f['ratio']:.3g}, spacing d/{scene.parameters['n']:g}, "
           f"t = {last.time:.4g} s")
     print(f"static state: kinetic / strain energy {f['kinetic_ratio']:.2e}")
     print(f"load {f['load']:.6g} N on the quarter: traction {f['traction']:.6g} Pa, net-section stress "

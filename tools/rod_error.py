@@ -22,7 +22,7 @@ import sys
 import numpy as np
 
 from parsph.analytic import driven_rod_velocity, free_rod_velocity
-from parsph.config import bodies
+from parsph import config
 from parsph.expressions import Field
 from parsph.io import read_snapshots
 
@@ -31,27 +31,26 @@ PAPER = {"sph": (0.05026, 0.04999), "rlm": (0.01301, 0.01297), "kbm": (0.00813, 
          "efg_nodal": (0.008322, 0.008232), "efg_cells": (0.006817, 0.006834)}
 
 
-def exact_axial(scene: dict):
+def exact_axial(scene: config.Scene):
     """(axial velocity function (X, gid, t) -> (n,), whether the case is the Gaussian)."""
-    [body] = bodies(scene)
-    [part] = body["parts"]
+    [body] = scene.bodies
+    [part] = body.parts
     lower, upper = part["lower"][0], part["upper"][0]
-    material = body["material"]
-    c = math.sqrt(material["youngs_modulus"] / material["density"])
-    fields = [ic for ic in scene["initial"] if ic["type"] == "velocity_field"]
+    material = body.material
+    c = math.sqrt(material.youngs_modulus / material.density)
+    fields = [ic for ic in scene.initial if ic.type == "velocity_field"]
     if fields:
-        v0 = Field("initial.expression[0]", fields[0]["expression"][0], scene["parameters"],
-                   scene["scene"]["dimension"])
+        v0 = Field("initial.expression[0]", fields[0].expression[0], scene.parameters, scene.scene.dimension)
 
         def gaussian(X, gid, t):
             return free_rod_velocity(X[:, 0] - lower, t, upper - lower, c,
                                      lambda s: v0(np.column_stack([s + lower, X[:, 1:]]), gid))
         return gaussian, True
-    [drive] = [bc for bc in scene["bc"] if bc["type"] == "velocity" and "duration" in bc]
+    [drive] = [bc for bc in scene.bc if bc.type == "velocity" and bc.duration is not None]
 
     def pulse(X, gid, t):
         x0 = X[:, 0].min()  # the driven column of particles, where the pulse starts
-        return driven_rod_velocity(X[:, 0] - x0, t, upper - x0, c, drive["value"][0], drive["duration"])
+        return driven_rod_velocity(X[:, 0] - x0, t, upper - x0, c, drive.value[0], drive.duration)
     return pulse, False
 
 
@@ -59,9 +58,9 @@ def snapshots(out: str) -> list:
     """[(time, reference positions, computed velocity, exact velocity)] for each snapshot of
     the run in `out` after t = 0."""
     with open(os.path.join(out, "scene.json")) as fh:
-        scene = json.load(fh)
+        scene = config.validate(json.load(fh))  # a resolved scene resolves to itself
     axial, _ = exact_axial(scene)
-    dim = scene["scene"]["dimension"]
+    dim = scene.scene.dimension
     rows = []
     for snapshot in read_snapshots(out, ("position", "displacement", "gid", "velocity")):
         if snapshot.time > 0:
@@ -113,9 +112,9 @@ def main():
         sys.exit(__doc__)
     for out in outs:
         with open(os.path.join(out, "scene.json")) as fh:
-            scene = json.load(fh)
-        form = bodies(scene)[0]["formulation"]
-        method = form["type"] + (f"_{form['integration']}" if form["type"] == "efg" else "")
+            scene = config.validate(json.load(fh))
+        form = scene.bodies[0].formulation
+        method = form.type + (f"_{form.integration}" if form.type == "efg" else "")
         paper = PAPER.get(method) if exact_axial(scene)[1] else None
         for k, (t, n, error) in enumerate(rod_errors(out)):
             ref = f"   [R] {paper[k]:.4f}" if paper and k < 2 else ""

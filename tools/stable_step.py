@@ -115,7 +115,7 @@ def measure(name: str, overrides: list, steps: int) -> dict:
     chosen = float(sim.diagnostics()["dt"])
     small = overrides + [f"time.cfl={REFERENCE_CFL}"]
     first = float(simulation(name, small).diagnostics()["dt"])
-    end = min(steps * first, sim.scene["time"]["end"])
+    end = min(steps * first, sim.scene.time.end)
     reference = run(name, small, end, None)
     default = verdict(name, overrides, end, None, reference)
     cache = {}

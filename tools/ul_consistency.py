@@ -41,7 +41,7 @@ def main() -> None:
     args = parser.parse_args()
 
     scene = config.load(args.scene, args.set)
-    if scene["formulation"]["type"] != "ulsph":
+    if scene.formulation.type != "ulsph":
         parser.error("the scene must use formulation.type = 'ulsph'")
     total = config.load(args.scene, args.set + ["formulation.type=tlsph", "formulation.update_every=0",
                                                  "formulation.update_strain=0"])
@@ -49,7 +49,7 @@ def main() -> None:
     ul = Simulation(scene, build_local(scene, comm), comm)
     tl = Simulation(total, build_local(total, comm), comm)
     n = ul.n_owned
-    end = args.until or scene["time"]["end"]
+    end = args.until or scene.time.end
     print("t [s]       updates  W_UL [J]     W_TL(x) [J]  ratio   dJ mean    dJ p1     dJ p99    "
           "largest |dJ| at X")
     while ul.t < end * (1 - 1e-12):

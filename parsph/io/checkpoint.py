@@ -133,8 +133,9 @@ def _estimate_bytes(fields: dict, scene_json: str, comm) -> int:
     return comm.allreduce(local) + len(scene_json) + 64 * 1024 + USERBLOCK
 
 
-def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int) -> str:
-    """Collective: write the run's state; returns the checkpoint's path."""
+def write_checkpoint(out_dir: str, sim, schedules: dict, scene_json: str, keep: int) -> str:
+    """Collective: write the run's state, with the resolved scene `scene_json`
+    (config.to_json); returns the checkpoint's path."""
     comm = sim.comm
     folder = os.path.join(out_dir, "checkpoints")
     name = f"step_{sim.step_count:08d}.h5"
@@ -143,7 +144,6 @@ def write_checkpoint(out_dir: str, sim, schedules: dict, scene: dict, keep: int)
     gid = sim.state.gid[:sim.state.n_owned]
     state = state_of(sim)
     fields = state["fields"]
-    scene_json = config.to_json(scene)
     with collective():
         if comm.rank == 0:
             os.makedirs(folder, exist_ok=True)
@@ -331,11 +331,12 @@ def physics_changes(old_scene: dict, scene: dict) -> list:
             if not any(k == free or (free.endswith(".") and k.startswith(free)) for free in RESTART_FREE)]
 
 
-def check_compatible(old_scene: dict, scene: dict, path: str) -> None:
-    """Refuse a restart whose scene changes the physics of the checkpointed run."""
+def check_compatible(old_scene: dict, scene: config.Scene, path: str) -> None:
+    """Refuse a restart whose scene changes the physics of the checkpointed run (`old_scene`
+    as stored)."""
     old_scene = copy.deepcopy(old_scene)
     config.upgrade(old_scene)  # as a scene of today states it
-    changed = physics_changes(old_scene, scene)
+    changed = physics_changes(old_scene, scene.as_dict())
     if changed:
         raise InputError(f"the scene differs from checkpoint {path} in {', '.join(changed)}; "
                          "only time.end, time.max_steps, time.wall_limit, output and balance settings may change "

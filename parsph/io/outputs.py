@@ -44,32 +44,33 @@ class Schedule:
 class Outputs:
     """The history, snapshots and checkpoints of one run in `out_dir` (collective)."""
 
-    def __init__(self, sim, scene: dict, scene_json: str, out_dir: str, data: dict | None, debug: bool = False):
+    def __init__(self, sim, scene, scene_json: str, out_dir: str, data: dict | None, debug: bool = False):
         """`data`: the checkpoint continued (its schedules), or None for a new run; `debug`
-        checks at every history row that no particle was lost or duplicated."""
-        self.sim, self.scene, self.out_dir, self.debug = sim, scene, out_dir, debug
-        out = self.settings = scene["output"]
+        checks at every history row that no particle was lost or duplicated; `scene` resolved
+        (config.Scene), `scene_json` its canonical text (config.to_json)."""
+        self.sim, self.scene_json, self.out_dir, self.debug = sim, scene_json, out_dir, debug
+        out = self.settings = scene.output
         resume = None if data is None else sim.step_count
         nexts = {} if data is None else data["schedules"]
-        units = {p["name"]: quantities.units(p["quantity"]) for p in scene["probes"]}
+        units = {p.name: quantities.units(p.quantity) for p in scene.probes}
         self.history = None
         output_dir.ensure_space(out_dir, 3 * len(scene_json), "the run's first output")
         with collective():
             if COMM.rank == 0:
                 with open(os.path.join(out_dir, "scene.json"), "w") as fh:
-                    json.dump(scene, fh, indent=2, sort_keys=True)
+                    json.dump(scene.as_dict(), fh, indent=2, sort_keys=True)
                 self.history = HistoryWriter(os.path.join(out_dir, "history.h5"), scene_json, units, resume)
         self.snapshots = SnapshotWriter(out_dir, scene_json, COMM, resume)
-        self.history_due = Schedule(out["history_interval"], out["history_every"], nexts.get("history"))
-        self.snapshot_due = Schedule(out["snapshot_interval"], 0, nexts.get("snapshot"))
-        self.checkpoint_due = Schedule(out["checkpoint_interval"], out["checkpoint_every"], nexts.get("checkpoint"))
+        self.history_due = Schedule(out.history_interval, out.history_every, nexts.get("history"))
+        self.snapshot_due = Schedule(out.snapshot_interval, 0, nexts.get("snapshot"))
+        self.checkpoint_due = Schedule(out.checkpoint_interval, out.checkpoint_every, nexts.get("checkpoint"))
         self.last = -1 if data is None else sim.step_count  # the step of the last history row
-        self.balance = balance_check(sim, scene, nexts.get("balance"))
+        self.balance = balance_check(sim, scene.balance, scene.symmetry, nexts.get("balance"))
 
     def start(self) -> None:
         """A new run's first history row and snapshot."""
         self.record()
-        if self.settings["snapshot_interval"] > 0:
+        if self.settings.snapshot_interval > 0:
             self.snapshot()
 
     def after_step(self, stopped: int) -> str | None:
@@ -129,7 +130,7 @@ class Outputs:
         self.last = sim.step_count
 
     def snapshot(self) -> None:
-        fields, sim = self.settings["snapshot_fields"], self.sim
+        fields, sim = self.settings.snapshot_fields, self.sim
         output_dir.ensure_space(self.out_dir, self.snapshots.estimate_bytes(sim, fields),
                                 f"the snapshot at step {sim.step_count}")
         self.snapshots.write(sim, fields)
@@ -148,20 +149,21 @@ class Outputs:
         self.write_history()
         schedules = {"history": self.history_due.next, "snapshot": self.snapshot_due.next,
                      "checkpoint": self.checkpoint_due.next, "balance": self.balance.state()}
-        return checkpoint.write_checkpoint(self.out_dir, self.sim, schedules, self.scene,
-                                           self.settings["checkpoint_keep"])
+        return checkpoint.write_checkpoint(self.out_dir, self.sim, schedules, self.scene_json,
+                                           self.settings.checkpoint_keep)
 
     def close(self) -> None:
         if self.history is not None:
             self.history.close()
 
 
-def balance_check(sim, scene: dict, restored: dict | None) -> BalanceCheck:
-    """The run's balance check (parsph.balance_check) of `sim`: its total mass, the axes no
-    symmetry plane is normal to, and whether its formulations conserve momentum (collective)."""
+def balance_check(sim, settings, symmetry: tuple, restored: dict | None) -> BalanceCheck:
+    """The run's balance check (parsph.balance_check, with the scene's [balance] `settings`)
+    of `sim`: its total mass, the axes no `symmetry` plane is normal to, and whether its
+    formulations conserve momentum (collective)."""
     mass = float(allsum(sim.comm, [total(sim.state.mass[: sim.state.n_owned])])[0])
-    planes = {plane["axis"] for plane in scene["symmetry"]}
+    planes = {plane.axis for plane in symmetry}
     free = [a for a in range(sim.state.dim) if a not in planes]
     momentum = all(b.formulation.conserves_momentum for b in sim.state.bodies)
     energy = all(b.formulation.conserves_energy for b in sim.state.bodies)
-    return BalanceCheck(scene["balance"], sim.state.dim, mass, free, momentum, energy, restored)
+    return BalanceCheck(settings, sim.state.dim, mass, free, momentum, energy, restored)

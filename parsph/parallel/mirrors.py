@@ -114,7 +114,7 @@ def body_sides(x: np.ndarray, planes: list, tol: float, comm) -> list:
 
 def add_images(local: LocalBody, position: str, planes: list, comm,
                skin: float = 0.0) -> tuple[LocalBody, Mirrors | None]:
-    """`local` with the mirror images across `planes` (scene["symmetry"]) of its particles
+    """`local` with the mirror images across `planes` (scene.symmetry) of its particles
     in the configuration `fields[position]` added as two layers, with reaches extended by
     `skin` (lists kept between searches, as the ghosts of add_ghosts); and their refresh
     plan (None without planes)."""

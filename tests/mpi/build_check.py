@@ -116,8 +116,8 @@ for name, scene in scenes.items():
         for key, value in serial.items():
             if not np.array_equal(whole[key], value):
                 failures.append(f"{name}: field {key} differs from the single-process build")
-        blockwise = all(p["shape"] != "random_patch" for p in scene["geometry"]["parts"])
-        parts, dim = scene["geometry"]["parts"], scene["scene"]["dimension"]
+        blockwise = all(p["shape"] != "random_patch" for p in scene.geometry.parts)
+        parts, dim = scene.geometry.parts, scene.scene.dimension
         candidates = sum(g.count for g in build._generators(parts, "geometry.parts", dim))  # before joining
         if blockwise and share > math.ceil(candidates / comm.size):
             failures.append(f"{name}: a rank generated {share} rows of one part, more than its share "
