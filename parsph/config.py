@@ -30,7 +30,7 @@ from parsph import expressions, quantities, surfaces, ties
 from parsph.errors import InputError
 from parsph.keys import REQUIRED, Key, greater_than, in_range, non_negative, one_of, positive
 from parsph.formulations import FAMILIES, FORMULATION_KEYS, FORMULATIONS
-from parsph.sections import section
+from parsph.sections import section as section_type
 from parsph.materials import FAILURE_KEYS, LAW_KEYS, LAWS, check_failure, constants, failure_of
 
 KERNELS = ("cubic_spline", "wendland_c2", "spiky")
@@ -876,8 +876,8 @@ def _bodies(scene: dict) -> list:
 
 # The typed sections (parsph.sections) of the resolved scene, made from the Key tables:
 # a section per table, an entry class per array of tables (a new array of TOP_LEVEL needs its own).
-SECTION_TYPES = {name: section(name.capitalize(), keys) for name, keys in SECTIONS.items()}
-ENTRY_TYPES = {name: section(cls, keys) for name, cls, keys in (
+SECTION_TYPES = {name: section_type(name.capitalize(), keys) for name, keys in SECTIONS.items()}
+ENTRY_TYPES = {name: section_type(cls, keys) for name, cls, keys in (
     ("bc", "Condition", BC_KEYS), ("tractions", "Traction", TRACTION_KEYS), ("walls", "Wall", WALL_KEYS),
     ("tools", "Tool", TOOL_KEYS), ("surfaces", "Surface", SURFACE_KEYS), ("symmetry", "Plane", SYMMETRY_KEYS),
     ("initial", "Initial", INITIAL_KEYS), ("probes", "Probe", PROBE_KEYS), ("contact", "ContactPair", CONTACT_KEYS),
