@@ -41,11 +41,11 @@ def test_a_body_moves_as_it_would_alone(hessian):
     alone_raw = copy.deepcopy(raw)
     del alone_raw["bodies"][1], alone_raw["initial"][1], alone_raw["groups"]["right_block"]
     alone = _sim(alone_raw, steps=60)
-    steel = both.bodies[0]
-    assert (steel.lo, steel.hi) == (0, alone.n_owned)
+    steel = both.state.bodies[0]
+    assert (steel.lo, steel.hi) == (0, alone.state.n_owned)
     assert both.t == alone.t
     for name in ("displacement", "velocity"):
-        assert np.array_equal(both.quantity(name)[:alone.n_owned], alone.quantity(name)), name
+        assert np.array_equal(both.quantity(name)[:alone.state.n_owned], alone.quantity(name)), name
     d_both, d_alone = both.diagnostics(), alone.diagnostics()
     for name in ("kinetic_energy", "strain_energy", "hourglass_energy", "total_energy"):
         assert d_both[f"{name}.steel"] == d_alone[name]
@@ -74,13 +74,13 @@ def test_an_updated_body_moves_beside_a_total_lagrangian_one_as_each_alone(updat
     del steel_raw["bodies"][1], steel_raw["initial"][1], steel_raw["groups"]["right_block"]
     del rubber_raw["bodies"][0], rubber_raw["initial"][0], rubber_raw["groups"]["left_block"]
     steel, rubber = _sim(steel_raw, steps=60), _sim(rubber_raw, steps=60)
-    lo, hi = both.bodies[1].lo, both.bodies[1].hi
-    n = rubber.n_owned
-    assert hi - lo == n and both.bodies[0].hi == steel.n_owned
+    lo, hi = both.state.bodies[1].lo, both.state.bodies[1].hi
+    n = rubber.state.n_owned
+    assert hi - lo == n and both.state.bodies[0].hi == steel.state.n_owned
     for name in ("displacement", "velocity", "deformation_gradient"):
         assert np.array_equal(both.quantity(name, np.arange(lo, hi)), rubber.quantity(name)), name
-    assert np.array_equal(both.Xr[lo:hi], rubber.Xr[:n]), "Xr"
-    assert np.array_equal(both.Xr[:lo], both.quantity("reference_position")[:lo])  # the steel block's reference stays
+    assert np.array_equal(both.state.Xr[lo:hi], rubber.state.Xr[:n]), "Xr"
+    assert np.array_equal(both.state.Xr[:lo], both.quantity("reference_position")[:lo])  # the steel block's reference stays
     u, v = steel.quantity("displacement"), steel.quantity("velocity")
     scale = np.abs(u).max()
     assert np.abs(both.quantity("displacement")[:lo] - u[:lo]).max() < 1e-10 * scale

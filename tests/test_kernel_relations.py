@@ -50,10 +50,10 @@ def assert_each_as_alone(both, alones: dict) -> None:
     """Each body of `both` has the displacements, velocities and deformation gradients of its
     run alone, bit for bit, and the same energies."""
     d_both = both.diagnostics()
-    for body in both.bodies:
+    for body in both.state.bodies:
         alone = alones[body.name]
         rows = np.arange(body.lo, body.hi)
-        assert len(rows) == alone.n_owned
+        assert len(rows) == alone.state.n_owned
         for name in ("displacement", "velocity", "deformation_gradient"):
             assert np.array_equal(both.quantity(name, rows), alone.quantity(name)), (body.name, name)
         d_alone = alone.diagnostics()
@@ -81,8 +81,8 @@ def test_updated_bodies_with_their_own_schedules_each_move_as_alone(bodies):
     counts = [r.count for r in both.topology.relations]
     assert counts == [alones["steel"].topology.count, alones["rubber"].topology.count]
     assert counts[0] == STEPS // 3 and 0 < counts[1] != counts[0]
-    lo, hi = both.bodies[1].lo, both.bodies[1].hi
-    assert np.array_equal(both.Xr[lo:hi], alones["rubber"].Xr[: alones["rubber"].n_owned])
+    lo, hi = both.state.bodies[1].lo, both.state.bodies[1].hi
+    assert np.array_equal(both.state.Xr[lo:hi], alones["rubber"].state.Xr[: alones["rubber"].state.n_owned])
     assert_each_as_alone(both, alones)
 
 
@@ -92,8 +92,8 @@ def test_bodies_with_their_own_kernels_each_move_as_alone():
     rubber block's kernel makes a difference."""
     both = stepped(blocks(KERNELS))
     assert [r.kernel for r in both.topology.relations] == ["cubic_spline", "wendland_c2"]
-    rubber = both.bodies[1]
-    assert np.all(both.support[rubber.lo:rubber.hi] == 2.4 * 0.005)
+    rubber = both.state.bodies[1]
+    assert np.all(both.state.support[rubber.lo:rubber.hi] == 2.4 * 0.005)
     alones = {"steel": stepped(blocks({"steel": KERNELS["steel"]})),
               "rubber": stepped(blocks({"rubber": (KERNELS["rubber"][0], "")},
                                        top='type = "wendland_c2"\nsupport = 2.4'))}
@@ -108,7 +108,7 @@ def test_bodies_with_their_own_hessian_stabilisation_each_move_as_alone():
     both = stepped(blocks(HESSIAN))
     relations = both.topology.relations
     assert [(r.eta, r.weighted_hessian) for r in relations] == [(0.3, True), (0.6, False)]
-    for r, body in zip(relations, both.bodies):  # each relation holds its body's stabilisation
+    for r, body in zip(relations, both.state.bodies):  # each relation holds its body's stabilisation
         counts = np.diff(r.ref.ptr)
         assert counts[body.lo:body.hi].all() and not np.delete(counts, np.arange(body.lo, body.hi)).any()
         assert np.abs(r.ref.q).max() > 0

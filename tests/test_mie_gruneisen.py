@@ -47,7 +47,7 @@ def test_flyer_plate_shock_meets_the_rankine_hugoniot_jump_conditions():
     rows = []
 
     def probe(s):
-        n = s.n_owned
+        n = s.state.n_owned
         X, v = s.quantity("reference_position")[:, 0], s.quantity("velocity")[:, 0]
         order = np.argsort(X)
         X, v, J = X[order], v[order], s.quantity("J")[order]

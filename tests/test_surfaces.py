@@ -69,7 +69,7 @@ def test_a_flat_stl_presses_a_block_as_the_same_wall_plane(plane):
     assert np.abs(a["wall0_force_z"]).max() > 10.0  # pressed
     assert np.allclose(b["surface0_force_z"], a["wall0_force_z"], rtol=1e-9, atol=1e-9 * np.abs(a["wall0_force_z"]).max())
     assert np.abs(b["surface0_force_x"]).max() < 1e-9 * np.abs(a["wall0_force_z"]).max()
-    (name, drawn), = preview.obstacle_surfaces(stl.scene, stl.X, stl.t)  # the plane where it is
+    (name, drawn), = preview.obstacle_surfaces(stl.scene, stl.state.X, stl.t)  # the plane where it is
     assert name == "surface0" and np.allclose(drawn[..., 2], 0.02 + stl.t, rtol=0, atol=1e-15)
     obj = plane.replace(".stl", ".obj")  # the same triangles with shared vertices
     trimesh.load(plane, process=False).export(obj)

@@ -69,14 +69,14 @@ velocity = [0.0, -1.0]
 def test_quarter_with_two_planes_moves_as_the_whole_block(formulation):
     quarter = simulation(pressed_block(True, formulation))
     whole = simulation(pressed_block(False, formulation))
-    n = quarter.n_owned
-    assert whole.n_owned == 4 * n
+    n = quarter.state.n_owned
+    assert whole.state.n_owned == 4 * n
     gap, match = cKDTree(whole.quantity("reference_position")).query(quarter.quantity("reference_position"))
     assert gap.max() < 1e-15
     for _ in range(150):
         quarter.step()
         whole.step()
-    if quarter.updated and not quarter.eulerian:
+    if quarter.state.updated and not quarter.state.eulerian:
         assert quarter.topology.count == whole.topology.count == 15
     scale = np.abs(whole.quantity("displacement")).max()
     assert scale > 1e-4  # the tools went 0.15 mm deep

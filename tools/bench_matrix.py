@@ -196,7 +196,7 @@ def bar_case(particles, overrides):
     c = np.sqrt(200e9 / 7850)
 
     def tip(s):  # the free end B, wherever it is owned
-        return COMM.allreduce(float(s.u[s.group_index("B"), 0].sum()))
+        return COMM.allreduce(float(s.state.u[s.group_index("B"), 0].sum()))
 
     seconds, t, u = timed_run(sim, 8.0 / c, probe=tip, every=5)
     exact = bar_tip_displacement(t, 1.0, c, 5.0)

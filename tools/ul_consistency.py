@@ -48,7 +48,7 @@ def main() -> None:
     comm = MPI.COMM_SELF
     ul = Simulation(scene, build_local(scene, comm), comm)
     tl = Simulation(total, build_local(total, comm), comm)
-    n = ul.n_owned
+    n = ul.state.n_owned
     end = args.until or scene.time.end
     print("t [s]       updates  W_UL [J]     W_TL(x) [J]  ratio   dJ mean    dJ p1     dJ p99    "
           "largest |dJ| at X")
@@ -56,12 +56,12 @@ def main() -> None:
         ul.step()
         if ul.step_count % args.every and ul.t < end * (1 - 1e-12):
             continue
-        tl.u[:n] = ul.u[:n]
+        tl.state.u[:n] = ul.state.u[:n]
         tl.compute_forces()
-        dJ = ul.J[:n] - tl.J[:n]
+        dJ = ul.state.J[:n] - tl.state.J[:n]
         k = int(np.argmax(np.abs(dJ)))
         w_ul, w_tl = ul.ledger.local(ul, "strain"), tl.ledger.local(tl, "strain")
-        where = ", ".join(f"{c:.4g}" for c in ul.X[k])
+        where = ", ".join(f"{c:.4g}" for c in ul.state.X[k])
         print(f"{ul.t:<11.5g} {ul.topology.count:<8d} {w_ul:<12.5g} {w_tl:<12.5g} {w_tl / w_ul:<7.4f} "
               f"{dJ.mean():+.2e} {np.percentile(dJ, 1):+.2e} {np.percentile(dJ, 99):+.2e} ({where})",
               flush=True)
