@@ -75,8 +75,8 @@ class Simulation:
         self.conditions.free_rigid_bodies(state, restart)
         if restart is not None:
             clock, carried = restart["clock"], restart["totals"]
-            self.t, self.step_count = clock["t"], clock["step"]
-            self.step_dt = clock.get("step_dt", 0.0)
+            self.running.t, self.running.step = clock["t"], clock["step"]
+            self.running.dt = clock.get("step_dt", 0.0)
             self.topology.restore(clock)
             for interaction in self.interactions:
                 interaction.restore(carried)
@@ -240,21 +240,21 @@ class Simulation:
         state.u[:n] += dt * state.v[:n]
         for body in conditions.rigid_bodies:
             body.drift(dt, state.X, state.u, state.v, state.F)
-        self.t = t_new
+        self.running.t = t_new
         conditions.prescribe_displacement(state, self.t)
         if self.walls.items:  # the obstacles' changes of velocity and displacement
             v_half, u_drift = state.v[:n].copy(), state.u[:n].copy()
             self.walls.enforce(state.X, state.u, state.v, state.mass, self.t, 0.5 * (self.step_dt + dt),
                                conditions.rigid_bodies)
             self.ledger.obstacles_moved(state, v_half, u_drift)
-        self.step_dt = dt
+        self.running.dt = dt
         self.compute_forces(move_reference=state.eulerian)
         if contact is not None:
             contact.check_inside(state.gid, state.body, [b.name for b in state.bodies], self.step_count + 1, self.t)
         self._kick(0.5 * dt)
         conditions.prescribe_velocity(state, self.t)
         self.ledger.end(state, conditions, self.interactions, self.t, dt)
-        self.step_count += 1
+        self.running.step += 1
         self.topology.stepped()
         self.stage_seconds["integration"] += (time.perf_counter() - start
                                               - (sum(self.stage_seconds.values()) - inside))
@@ -319,32 +319,11 @@ class Simulation:
         """The step size the next step will use (unless shortened to end at t_end)."""
         return self.stable.dt
 
-    @property
-    def t(self) -> float:
-        """The time reached (the constraints in force depend on it)."""
-        return self.running.t
-
-    @t.setter
-    def t(self, value: float) -> None:
-        self.running.t = value
-
-    @property
-    def step_count(self) -> int:
-        """The steps taken."""
-        return self.running.step
-
-    @step_count.setter
-    def step_count(self, value: int) -> None:
-        self.running.step = value
-
-    @property
-    def step_dt(self) -> float:
-        """The size of the last step, which brought F from the committed state (rate-dependent laws)."""
-        return self.running.dt
-
-    @step_dt.setter
-    def step_dt(self, value: float) -> None:
-        self.running.dt = value
+    # the clock (formulations.base.Running): the time reached, the steps taken, the size of the
+    # last step (which brought F from the committed state: rate-dependent laws)
+    t = property(lambda self: self.running.t)
+    step_count = property(lambda self: self.running.step)
+    step_dt = property(lambda self: self.running.dt)
 
     # ----------------------------------------------------------------- the public read-outs
     def group_index(self, name: str) -> np.ndarray:

@@ -174,7 +174,7 @@ def test_a_snapshot_with_a_value_that_is_not_finite_is_refused_before_it_is_writ
     writer.write(sim, ["position", "velocity"])
     before = (tmp_path / "snapshots.h5").read_bytes(), (tmp_path / "snapshots.xdmf").read_text()
     sim.state.v[7, 1] = np.inf
-    sim.step_count += 1
+    sim.running.step += 1
     message = rf"the snapshot at step 1, .*velocity of particle {sim.state.gid[7]} is not finite"
     with pytest.raises(ParsphError, match=message):
         writer.write(sim, ["position", "velocity"])

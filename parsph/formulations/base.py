@@ -128,9 +128,15 @@ class Formulation:
 
     def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
         """(stable step, largest incremental log strain, the row that sets the step or -1)
-        over the body's owned particles, with the interactions' springs' squared frequencies
-        `omega2` (formulations.tlsph.stable_time_step)."""
-        raise NotImplementedError
+        over the body's owned particles, with its hourglass springs (none: HOURGLASS_OFF) and
+        the interactions' springs' squared frequencies `omega2`
+        (formulations.tlsph.stable_time_step)."""
+        from parsph.formulations import tlsph  # which imports this module
+        ref = body.relation.ref
+        return tlsph.stable_time_step(
+            body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
+            ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
+            state.broken, state.omega_hg2, self.hourglass_form, omega2, state.step_limit, state.scratch33)
 
 
 class Running:

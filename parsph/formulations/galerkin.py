@@ -309,15 +309,6 @@ class GalerkinFormulation(Formulation):
         coupling = self.couplings[0]
         return coupling.ptr, coupling.idx, coupling.phi
 
-    def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
-        """The stable step of F at the particles, without hourglass springs
-        (formulations.tlsph.stable_time_step)."""
-        ref = body.relation.ref
-        return tlsph.stable_time_step(
-            body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
-            ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
-            state.broken, state.omega_hg2, tlsph.HOURGLASS_OFF, omega2, state.step_limit, state.scratch33)
-
     def stages(self, state, body, running: Running) -> list:
         """The passes of one force evaluation over `body`'s owned particles and integration
         points of `state`."""

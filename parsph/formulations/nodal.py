@@ -148,14 +148,6 @@ class NodalFormulation(Formulation):
         particles' arrays (a density per unit reference volume: psi, plastic work)."""
         return state.volume[body.lo:body.hi] * density(state.particles.arrays)[body.lo:body.hi]
 
-    def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
-        """The particles' stable step with its hourglass springs (formulations.tlsph.stable_time_step)."""
-        ref = body.relation.ref
-        return tlsph.stable_time_step(
-            body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
-            ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
-            state.broken, state.omega_hg2, self.hourglass_form, omega2, state.step_limit, state.scratch33)
-
     def stages(self, state, body, running: Running) -> list:
         """The passes of one force evaluation over `body`'s owned particles of `state`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
