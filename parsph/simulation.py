@@ -52,8 +52,7 @@ class Simulation:
                   for b, spec in enumerate(scene.bodies)]
         # the step allowed by the particles' motion is limited by contact and surfaces (and viscosity)
         limited = bool(scene.contact or scene.surfaces)
-        self.state = state = RankState(bodies, dim, comm, sorted(scene.groups), limited)
-        state.offsets = offsets
+        self.state = state = RankState(bodies, offsets, dim, comm, sorted(scene.groups), limited)
         self.failure = Failure(bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, bodies, local, comm)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step

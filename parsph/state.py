@@ -113,8 +113,9 @@ class RankState:
     viscosity (their arrays), and the owners of the registered fields the particles carry.
     Each body's kernel, eta and schedule are its kernel relation's (parsph.kernel_relation)."""
 
-    def __init__(self, bodies: list, dim: int, comm, group_names: list, limited: bool):
+    def __init__(self, bodies: list, offsets: np.ndarray, dim: int, comm, group_names: list, limited: bool):
         self.bodies, self.dim, self.comm, self.group_names = bodies, dim, comm, group_names
+        self.offsets = offsets  # the first global id of each body, and the total
         forms = [b.formulation for b in bodies]
         moving = [b.formulation for b in bodies if b.moves]  # their reference moves
         self.updated = bool(moving)
