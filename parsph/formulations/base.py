@@ -12,6 +12,7 @@ the displacement). No refresh is placed by hand.
 from __future__ import annotations
 
 import contextlib
+from abc import ABC, abstractmethod
 import fcntl
 import hashlib
 import os
@@ -44,7 +45,7 @@ KEYS = {
 }
 
 
-class Formulation:
+class Formulation(ABC):
     """One body's formulation as the rest of the code sees it: what a family (formulations.nodal,
     formulations.galerkin) declares, the options the loop and the kernel relations read, and
     what it builds, evaluates and integrates. The defaults are those of a family without the
@@ -72,19 +73,19 @@ class Formulation:
     collocates = False  # its constraints act through its trial functions (parsph.collocation)
 
     @staticmethod
+    @abstractmethod
     def resolve(path: str, form: dict) -> None:
         """Its defaults and rules on a formulation table `form` checked against the schema
         (InputError naming the key at `path`)."""
-        raise NotImplementedError
 
     @staticmethod
     def check_body(body: dict, where: str, scene: dict) -> None:
         """Its rules on a resolved body of the scene (InputError naming `where`)."""
 
     @staticmethod
+    @abstractmethod
     def moves_reference(form: dict) -> bool:
         """Whether a formulation table moves its reference."""
-        raise NotImplementedError
 
     def __init__(self, options: dict, dim: int, law: int, failure: int = 0):
         """Its options from the resolved formulation table, compiled for the dimension, the
@@ -92,19 +93,19 @@ class Formulation:
         self.type = options["type"]
 
     @property
+    @abstractmethod
     def pair_options(self):
         """The options of its particle pairs in its kernel relation
         (formulations.reference.PairOptions)."""
-        raise NotImplementedError
 
     def build(self, state, body, kernel: str, skin: float = 0.0, search: bool = True) -> None:
         """Its own relations on the adopted state (state.RankState) besides the particle
         pairs of its kernel relation: none."""
 
+    @abstractmethod
     def stages(self, state, body, running: Running) -> list:
         """The passes (Stage) of one force evaluation over `body`'s owned points of `state`
         (state.RankState), reading what changes while the run goes from `running`."""
-        raise NotImplementedError
 
     def moved(self, state, body) -> np.ndarray:
         """Positions of the body's owned points of its own set in the current configuration
@@ -116,15 +117,15 @@ class Formulation:
         for collocated constraints (collocates)."""
         raise NotImplementedError(f"formulation '{self.type}' does not collocate its constraints")
 
+    @abstractmethod
     def quadrature(self, state, body) -> list:
         """[(X, F, w)] of the body's owned integration points: reference positions,
         deformation gradients, quadrature weights."""
-        raise NotImplementedError
 
+    @abstractmethod
     def integrated(self, state, body, density) -> np.ndarray:
         """w_q q_q over the body's owned integration points, q = density(arrays) per row of a
         point set's arrays (a density per unit reference volume: psi, plastic work)."""
-        raise NotImplementedError
 
     def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
         """(stable step, largest incremental log strain, the row that sets the step or -1)
