@@ -133,7 +133,7 @@ class Ledger:
         """Keep what the step's works need from its start (after the commit, before the kick)."""
         n = state.n_owned
         self._start = dict(u=state.u[:n].copy(), v=state.v[:n].copy() if conditions.bcs.moving or conditions.collocation else None,
-                           **{f.name: getattr(state, f.name).copy() for f in state.forces() if f.work},
+                           **{f.name: getattr(state, f.name).copy() for f in state.forces if f.work},
                            force=state.force,
                            dissipation={i.name: i.dissipation.copy() for i in interactions if i.dissipative},
                            external=self.external,
@@ -145,7 +145,7 @@ class Ledger:
         Eulerian kernel's search) repartitions them; {} between steps."""
         if self._start is None:
             return {}
-        per_particle = {"u", "force", "external", "internal"} | {f.name for f in state.forces() if f.work} | (
+        per_particle = {"u", "force", "external", "internal"} | {f.name for f in state.forces if f.work} | (
             {"heating"} if state.viscous else set())
         out = {}
         for key, value in self._start.items():
@@ -186,7 +186,7 @@ class Ledger:
         a prescribed motion."""
         n, start = state.n_owned, self._start
         du = state.u[:n] - start["u"]
-        for force in (f for f in state.forces() if f.work):  # forces without a potential
+        for force in (f for f in state.forces if f.work):  # forces without a potential
             now = getattr(state, force.name)
             for b in (b for b in state.bodies if force.absorbs(b.formulation)):
                 work = -0.5 * (start[force.name][b.lo:b.hi] + now[b.lo:b.hi]) * du[b.lo:b.hi]

@@ -175,7 +175,7 @@ class Simulation:
                 stale.update(stage.writes)
             k += 1
         internal = None
-        for force in state.forces():  # state.FORCES
+        for force in state.forces:  # state.FORCES
             if internal is None:
                 internal = getattr(state, force.name).copy()
             else:

@@ -135,6 +135,8 @@ class RankState:
         if self.viscous:
             self.owners.add("viscosity")
         self.carried = fields.carried(self.owners)  # the registered fields the particles carry
+        need = {w.name: w.need for w in WORK}
+        self.forces = [f for f in FORCES if need[f.name] is None or self.needs[need[f.name]]]  # those the bodies need
 
     def adopt(self, local: LocalBody, decomp: Decomposition, body: np.ndarray, keep: int) -> None:
         """Take the first `keep` rows of `local` (owned particles, then ghosts; `body`: each
@@ -178,11 +180,6 @@ class RankState:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, decomp, self.carried, arrays)
         self.sets = {name: self._adopt_set(name, other) for name, other in (local.sets or {}).items()}
-
-    def forces(self) -> list:
-        """The forces of FORCES whose arrays the bodies need (state.Force)."""
-        needs = {w.name: w.need for w in WORK}
-        return [f for f in FORCES if needs[f.name] is None or self.needs[needs[f.name]]]
 
     def _adopt_set(self, name: str, local: LocalBody) -> PointSet:
         """Another point set (stress points, Gauss points: formulations.galerkin): owned
