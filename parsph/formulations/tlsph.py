@@ -79,28 +79,62 @@ VARIATIONAL_SCALE = 0.2
 VISCOUS_ONSET = 1.0e-3
 
 
-@functools.lru_cache(maxsize=None)
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
                    hessian: bool = False, failure: int = 0, viscous: bool = False):
     """(gradient, kinematics_stress, hessian_transpose, forces) for one body's switches:
     dimension, material law (materials.update), force row, hourglass form, reference
     (REFERENCE_*), Hessian stabilisation, the failure model (0: none, materials.damage.TENSILE or
-    materials.johnson_cook_failure: only the stages of a body with one compile it), and with the paper's hourglass form LAMMPS MACHDYN's viscous
-    hourglass force for yielded pairs (`viscous`). Each stage works on the owned rows lo..hi-1.
+    materials.johnson_cook_failure.JOHNSON_COOK_FAILURE), and with the paper's hourglass form
+    LAMMPS MACHDYN's viscous hourglass force for yielded pairs (`viscous`). Each stage works
+    on the owned rows lo..hi-1.
 
     The switches are closure constants, so branches on them are folded away by the
-    compiler. The stage bodies are written out here rather than inlined from module-level
-    functions: Numba inlines a function by copying its IR (per block, with its whole scope),
-    and for bodies this size that copy took about a third of each variant's compile time.
+    compiler. Each stage is compiled for the switches it reads only (`_hessian_passes`,
+    `_stress_stage`, `_force_stage`), so bodies that differ in the others share it. The
+    stage bodies are written out rather than inlined from module-level functions: Numba
+    inlines a function by copying its IR (per block, with its whole scope), and for bodies
+    this size that copy took about a third of each variant's compile time; the material
+    laws, the largest part, are functions of their own (materials.update).
     `gradient` and `hessian_transpose` are the extra passes of Hessian's-difference
     stabilisation.
     """
+    gradient, hessian_transpose = _hessian_passes(dim)
+    kinematics_stress = _stress_stage(dim, law, hourglass == HOURGLASS_VARIATIONAL, reference, hessian, failure)
+    forces = _force_stage(dim, force_form, hourglass, hessian, viscous)
+    return gradient, kinematics_stress, hessian_transpose, forces
+
+
+@functools.lru_cache(maxsize=None)
+def _hessian_passes(dim: int):
+    """(gradient, hessian_transpose): the extra passes of Hessian's-difference stabilisation."""
     @njit(cache=True, _nrt=False)
     def gradient(lo, hi, ptr, idx, g, d, f):
         """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles lo..hi-1 [V eq. 12]."""
         for i in range(lo, hi):
             gradient_row(dim, i, i, ptr, idx, g, d, f)
 
+    @njit(cache=True, _nrt=False)
+    def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
+        """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
+        [V eq. 21] feeds back into the forces."""
+        for i in range(lo, hi):
+            for a in range(dim):
+                for b in range(dim):
+                    B[i, a, b] = 0.0
+            for p in range(ptr[i], ptr[i + 1]):
+                j = idx[p]
+                for a in range(dim):
+                    for b in range(dim):
+                        B[i, a, b] += VP[j, a, b] * gh_rev[p] - VP[i, a, b] * gh[p]
+
+    variant = f"{COMPILED_SOURCE} {dim}"
+    return CompiledOnce(gradient, variant), CompiledOnce(hessian_transpose, variant)
+
+
+@functools.lru_cache(maxsize=None)
+def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian: bool, failure: int):
+    """kinematics_stress, stage 1, for its switches (`variational`: the variational hourglass
+    form's penalty and hourglass stress)."""
     @njit(cache=True, _nrt=False)
     def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
                           damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, dt):
@@ -125,7 +159,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             if stress_at(dim, law, reference, failure, i, fs, Fr, volume[i], c, state, trial, damage_state,
                          damage_trial, P, work, F, VP, J, psi, dt) and first_bad < 0:
                 first_bad = i
-            if hourglass == HOURGLASS_VARIATIONAL:
+            if variational:
                 # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
                 phi = 0.0
                 for p in range(ptr[i], ptr[i + 1]):
@@ -145,20 +179,12 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
                 hg_psi[i] = phi
         return first_bad
 
-    @njit(cache=True, _nrt=False)
-    def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
-        """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
-        [V eq. 21] feeds back into the forces."""
-        for i in range(lo, hi):
-            for a in range(dim):
-                for b in range(dim):
-                    B[i, a, b] = 0.0
-            for p in range(ptr[i], ptr[i + 1]):
-                j = idx[p]
-                for a in range(dim):
-                    for b in range(dim):
-                        B[i, a, b] += VP[j, a, b] * gh_rev[p] - VP[i, a, b] * gh[p]
+    return CompiledOnce(kinematics_stress, f"{COMPILED_SOURCE} {dim} {law} {variational} {reference} {hessian} {failure}")
 
+
+@functools.lru_cache(maxsize=None)
+def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, viscous: bool):
+    """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
                volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, v, plastic, support, kind, vc):
@@ -293,8 +319,7 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
-    variant = f"{COMPILED_SOURCE} {dim} {law} {force_form} {hourglass} {reference} {hessian} {failure} {viscous}"
-    return tuple(CompiledOnce(kernel, variant) for kernel in (gradient, kinematics_stress, hessian_transpose, forces))
+    return CompiledOnce(forces, f"{COMPILED_SOURCE} {dim} {force_form} {hourglass} {hessian} {viscous}")
 
 
 @njit(cache=True, inline="always")

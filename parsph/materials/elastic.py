@@ -78,7 +78,7 @@ def first_piola(F, S, dim, P):
             P[a, b] = s
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)  # not inlined: compiled once, shared by every stage that calls it
 def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
     """P for the law `model` with its three constants (lam, mu, bulk; for Mooney-Rivlin
     lambda, c1, c2; for Tait B, gamma, -); returns psi (NaN if J <= 0).

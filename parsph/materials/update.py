@@ -10,15 +10,18 @@ of `trial`; the loop commits trial to state at the start of the next step, so ev
 the stress again at the same F (a restart, a reference update) gives the same result.
 `work` is scratch space, (WORK, 3, 3), allocated once per stage; dt is the step over
 which F came from the committed state (0 at set-up), for the laws whose stress depends
-on the rate. `stiffening` is the
-factor on the reference P-wave speed squared that the stable time step uses. `law` is a
-compile-time constant of the calling stage, so the branch below is folded away: each
-stage holds only its law's code. A new law family adds one branch here and its line in
-materials.LAWS.
+on the rate. `stiffening` is the factor on the reference P-wave speed squared that the
+stable time step uses. `law` is a compile-time constant of the calling stage, so the
+branch below is folded away and a stage calls only its law's code. Each law family is a
+function of its own, not inlined: Numba compiles it once and every stage variant that
+uses it links it from the on-disk cache, where an inlined body was copied and typed
+again in each variant (most of a stage's compile time). A new law family adds one branch
+here and its line in materials.LAWS.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -30,6 +33,9 @@ WORK = elastoplastic.WORK  # the most scratch matrices a law uses
 J2_PLASTICITY = elastoplastic.J2_PLASTICITY
 JOHNSON_COOK = johnson_cook.JOHNSON_COOK
 MIE_GRUNEISEN = mie_gruneisen.MIE_GRUNEISEN
+# the failure models as plain globals: a branch on a module's attribute is not folded away
+TENSILE = damage.TENSILE
+JOHNSON_COOK_FAILURE = johnson_cook_failure.JOHNSON_COOK_FAILURE
 
 
 @njit(cache=True, inline="always")
@@ -63,9 +69,9 @@ def update_failing(law, failure, F, dim, c, state, trial, damaged, damaged_trial
     if has_failed(failure, damaged, i):
         return damage.failed(F, dim, damaged, damaged_trial, i, P)
     e = update(law, F, dim, c, state, trial, i, P, work, dt)
-    if failure == damage.TENSILE:
+    if failure == TENSILE:
         damage.degrade(P, F, dim, damaged, damaged_trial, i, work)
-    elif failure == johnson_cook_failure.JOHNSON_COOK_FAILURE:
+    elif failure == JOHNSON_COOK_FAILURE:
         johnson_cook_failure.accumulate(P, F, dim, c, state, trial, damaged, damaged_trial, i, work, dt)
     return e
 
@@ -89,11 +95,20 @@ def stiffening(law, s_max, J, c):
     return max(1.0, 1.0 - math.log(J)) if J > 0 else math.inf
 
 
-@njit(cache=True)
-def stresses(law, F, dim, c, state, trial, P, psi, dt=0.0):
+def stresses(law, F, dim, c, state, trial, P, psi, dt=0.0) -> None:
     """P[n], psi[n] and trial[n] for a stack of deformation gradients F[n] from the
     committed states state[n] (output, material tests; state and trial have no columns
     for a law without state)."""
-    work = np.empty((WORK, 3, 3))
-    for n in range(F.shape[0]):
-        psi[n] = update(law, F[n], dim, c, state, trial, n, P[n], work, dt)
+    _stack_update(int(law), int(dim))(F, c, state, trial, P, psi, float(dt))
+
+
+@functools.lru_cache(maxsize=None)
+def _stack_update(law: int, dim: int):
+    """`stresses`' kernel for one law and dimension, closure constants as in the stages, so
+    that it compiles only that law's code and links the law's function the stages use."""
+    @njit(cache=True)
+    def kernel(F, c, state, trial, P, psi, dt):
+        work = np.empty((WORK, 3, 3))
+        for n in range(F.shape[0]):
+            psi[n] = update(law, F[n], dim, c, state, trial, n, P[n], work, dt)
+    return kernel
