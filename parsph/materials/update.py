@@ -39,15 +39,24 @@ JOHNSON_COOK_FAILURE = johnson_cook_failure.JOHNSON_COOK_FAILURE
 
 
 @njit(cache=True, inline="always")
+def runtime(n):
+    """n as a run-time integer: passed as a literal (a stage's closure constant), it would
+    compile the callee again for each value; the laws take the dimension at run time, so
+    one compiled law serves every dimension and the output's 3 x 3 stresses."""
+    return max(n, 0)
+
+
+@njit(cache=True, inline="always")
 def update(law, F, dim, c, state, trial, i, P, work, dt):
     """One branch per law family (the hyperelastic laws share one)."""
+    d = runtime(dim)
     if law == J2_PLASTICITY:
-        return elastoplastic.j2(F, dim, c, state, trial, i, P, work)
+        return elastoplastic.j2(F, d, c, state, trial, i, P, work)
     if law == JOHNSON_COOK:
-        return johnson_cook.update(F, dim, c, state, trial, i, P, work, dt)
+        return johnson_cook.update(F, d, c, state, trial, i, P, work, dt)
     if law == MIE_GRUNEISEN:
-        return mie_gruneisen.update(F, dim, c, state, trial, i, P, work, dt)
-    return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
+        return mie_gruneisen.update(F, d, c, state, trial, i, P, work, dt)
+    return elastic.stress(law, F, d, c[0], c[1], c[2], P, work[0], work[1], work[2])
 
 
 @njit(cache=True, inline="always")
@@ -66,13 +75,14 @@ def update_failing(law, failure, F, dim, c, state, trial, damaged, damaged_trial
     i of `damaged` (new: `damaged_trial`): a failed point (damage 1) carries no stress and
     its law is not evaluated; otherwise tensile damage degrades the law's stress, or the
     Johnson-Cook index accumulates."""
+    d = runtime(dim)
     if has_failed(failure, damaged, i):
-        return damage.failed(F, dim, damaged, damaged_trial, i, P)
+        return damage.failed(F, d, damaged, damaged_trial, i, P)
     e = update(law, F, dim, c, state, trial, i, P, work, dt)
     if failure == TENSILE:
-        damage.degrade(P, F, dim, damaged, damaged_trial, i, work)
+        damage.degrade(P, F, d, damaged, damaged_trial, i, work)
     elif failure == JOHNSON_COOK_FAILURE:
-        johnson_cook_failure.accumulate(P, F, dim, c, state, trial, damaged, damaged_trial, i, work, dt)
+        johnson_cook_failure.accumulate(P, F, d, c, state, trial, damaged, damaged_trial, i, work, dt)
     return e
 
 
