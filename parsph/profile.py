@@ -317,17 +317,17 @@ def peak_flops() -> tuple[float, str]:
 
 def arrays_held(obj, prefix: str = "", seen: set | None = None, out: list | None = None, depth: int = 0) -> list:
     """(name, array) for every numpy array reachable from obj's attributes, dicts, lists
-    and dataclass fields, three levels deep, each buffer once (a view, or the
+    and dataclass fields, five levels of them deep, each buffer once (a view, or the
     total-Lagrangian d = u, is counted under the first name found)."""
     seen = set() if seen is None else seen
     out = [] if out is None else out
-    if depth > 2:
-        return out
     if isinstance(obj, np.ndarray):
         base = obj if obj.base is None else obj.base
         if id(base) not in seen and obj.nbytes:
             seen.add(id(base))
             out.append((prefix, obj))
+        return out
+    if depth > 4:
         return out
     if isinstance(obj, dict):
         items = obj.items()

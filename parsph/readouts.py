@@ -14,6 +14,7 @@ from parsph import fields, materials, quantities
 from parsph.errors import InputError
 from parsph.exact_sum import allsum
 from parsph.formulations import tlsph
+from parsph.kernels.functions import KERNEL_NAMES
 from parsph.materials import update
 
 
@@ -42,29 +43,30 @@ def quadrature(sim) -> tuple:
 
 def disorder(sim) -> np.ndarray:
     """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
-    error = tlsph.hourglass_error(sim.state.dim)
-    return by_relation(sim, lambda ref, out: error(sim.state.n_owned, ref.ptr, ref.idx, ref.dx, ref.w, sim.state.d, sim.state.fs, out,
-                                                   sim.state.scratch33))
+    error, state = tlsph.hourglass_error(sim.state.dim), sim.state
+    return by_relation(sim, lambda r, out: error(
+        state.n_owned, r.ref.ptr, r.ref.idx, r.ref.X, state.support, KERNEL_NAMES.index(r.kernel), state.d, state.fs, out,
+        state.scratch33, np.empty(3)))
 
 
 def spacing_ratio(sim) -> np.ndarray:
     """Current-configuration disorder of each owned particle (tlsph.spacing_ratio), with the
     ghosts where the last force evaluation saw them."""
     x = sim.state.Xr + sim.state.d if sim.state.updated else sim.state.X + sim.state.u
-    return by_relation(sim, lambda ref, out: tlsph.spacing_ratio(sim.state.n_owned, ref.ptr, ref.idx, x, sim.state.measure,
-                                                                 sim.state.F, sim.state.dim, out, sim.state.scratch33))
+    return by_relation(sim, lambda r, out: tlsph.spacing_ratio(sim.state.n_owned, r.ref.ptr, r.ref.idx, x, sim.state.measure,
+                                                               sim.state.F, sim.state.dim, out, sim.state.scratch33))
 
 
 def by_relation(sim, fill) -> np.ndarray:
-    """A value per owned particle that `fill(ref, out)` writes row by row from a kernel
-    relation's reference data: each body's rows from its own relation."""
+    """A value per owned particle that `fill(relation, out)` writes row by row from a kernel
+    relation (its reference data): each body's rows from its own relation."""
     out = np.empty(sim.state.n_owned)
     for r in sim.topology.relations:
         if r.whole:
-            fill(r.ref, out)
+            fill(r, out)
             continue
         part = np.empty(sim.state.n_owned)
-        fill(r.ref, part)
+        fill(r, part)
         for b in r.bodies:
             out[b.lo:b.hi] = part[b.lo:b.hi]
     return out

@@ -34,14 +34,14 @@ class ReferenceData:
     """CSR rows of the owned particles (indices into the rank's local arrays)."""
 
     ptr: np.ndarray
-    idx: np.ndarray
-    dx: np.ndarray  # X_j - X_i in the reference
-    w: np.ndarray  # kernel values
+    idx: np.ndarray  # 32-bit neighbour rows
+    # the reference positions of the local particles (the pairs' X_j - X_i, their kernel values
+    # and regularising lengths are formed from them where they are needed, not stored)
+    X: np.ndarray
     g: np.ndarray
     g_rev: np.ndarray
     g_sum: np.ndarray
     hgc: np.ndarray  # hourglass coefficients c_ij (empty without hourglass control)
-    hreg: np.ndarray  # regularising lengths of the paper form
     q: np.ndarray  # Hessian stabilisation (empty when eta = 0)
     q_rev: np.ndarray
     q_sum: np.ndarray
@@ -113,17 +113,17 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     n = n_owned
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
-    idx = np.ascontiguousarray(pairs.idx[:end], dtype=np.int64)
+    idx = np.ascontiguousarray(pairs.idx[:end], dtype=np.int32)
     if np.isnan(ref.g_rev[:end]).any():
         raise ParsphError("internal: a neighbour of an owned particle has no reference row")
     rows = pairs.row_of_pair()[:end]
-    hgc, hreg = np.zeros(0), np.zeros(0)
+    hgc = np.zeros(0)
     if any(o.hourglass_form for o in options):
-        hgc, hreg = np.zeros(end), np.zeros(end)
+        hgc = np.zeros(end)
         for b, o in enumerate(options):
             if o.hourglass_form:
                 tlsph.hourglass_coefficients(o.hourglass_form, ptr, idx, ref.dx, ref.w, ref.h, volume, measure,
-                                             float(o.alpha), body[:n], b, hgc, hreg)
+                                             float(o.alpha), body[:n], b, hgc)
     dim = X.shape[1]
     q = q_rev = np.zeros((0, dim))
     gh = gh_rev = np.zeros(0)
@@ -154,9 +154,8 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
-        ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), w=np.ascontiguousarray(ref.w[:end]),
-        g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
-        g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, hreg=hreg, q=q, q_rev=q_rev, q_sum=q_sum,
+        ptr=ptr, idx=idx, X=X, g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
+        g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum,
         gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
 
 
@@ -170,19 +169,19 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
     end, bad = kept.rebuild(X, measure, support, gid, plain, n, min_spacing, stiffening, tolerant)
     dim = X.shape[1]
     ptr, idx, dx, w = kept.ptr[: n + 1], kept.idx[:end], kept.dx[:end], kept.w[:end]
-    hgc = hreg = np.zeros(0)
+    hgc = np.zeros(0)
     if any(o.hourglass_form for o in options):
-        hgc, hreg = np.zeros(end), np.zeros(end)
+        hgc = np.zeros(end)
         for b, o in enumerate(options):
             if o.hourglass_form:
                 tlsph.hourglass_coefficients(o.hourglass_form, ptr, idx, dx, w, kept.h[:end], volume, measure,
-                                             float(o.alpha), body[:n], b, hgc, hreg)
+                                             float(o.alpha), body[:n], b, hgc)
     stabilised = kept.eta > 0
     if stabilised:
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
-        ptr=ptr, idx=idx, dx=dx, w=w, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
-        hreg=hreg, q=kept.q[:end] if stabilised else np.zeros((0, dim)),
+        ptr=ptr, idx=idx, X=X, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
+        q=kept.q[:end] if stabilised else np.zeros((0, dim)),
         q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
         q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),
         gh_rev=kept.gh_rev[:end] if stabilised else np.zeros(0), min_spacing=min_spacing, stiffening=stiffening,

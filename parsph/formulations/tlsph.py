@@ -57,7 +57,7 @@ from numba import njit
 
 from parsph import COMPILED_SOURCE
 from parsph.formulations.base import CompiledOnce
-from parsph.kernels.functions import value_and_slope
+from parsph.kernels.functions import value, value_and_slope
 from parsph.materials import update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
 from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
@@ -136,11 +136,12 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
     """kinematics_stress, stage 1, for its switches (`variational`: the variational hourglass
     form's penalty and hourglass stress)."""
     @njit(cache=True, _nrt=False)
-    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
-                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, dt):
+    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, X, hgc, d, volume, youngs, c, state, trial, damage_state,
+                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, xr, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial) and (variational form)
-        hourglass penalty hg_psi; returns the first inverted particle or -1."""
+        hourglass penalty hg_psi; returns the first inverted particle or -1. X: the reference
+        positions (X_ij = X_j - X_i, formed here rather than stored per pair); xr: scratch."""
         first_bad = -1
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
@@ -165,17 +166,19 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                 for p in range(ptr[i], ptr[i + 1]):
                     j = idx[p]
                     k = hgc[p] * youngs[i]
+                    for a in range(dim):
+                        xr[a] = X[j, a] - X[i, a]
                     e2 = 0.0
                     for a in range(dim):
                         fx = 0.0
                         for b in range(dim):
-                            fx += fs[i, a, b] * dx[p, b]
-                        err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
+                            fx += fs[i, a, b] * xr[b]
+                        err[a] = fx - xr[a] - d[j, a] + d[i, a]
                         e2 += err[a] * err[a]
                     phi += 0.5 * k * e2
                     for a in range(dim):
                         for b in range(dim):
-                            VP[i, a, b] += k * err[a] * dx[p, b]
+                            VP[i, a, b] += k * err[a] * xr[b]
                 hg_psi[i] = phi
         return first_bad
 
@@ -186,8 +189,8 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
 def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, viscous: bool):
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
-    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, hreg, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, v, plastic, support, kind, vc):
+    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, X, hgc, d, fs, VP, B, youngs,
+               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, xr, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
         frequency (see `stable_time_step`). With `viscous`, a pair of which a particle's
@@ -247,11 +250,14 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                                 if pair_form:
                                     s += VP[i, a, b] * g[p, b]
                         f_int[i, a] += s
+                if hourglass != HOURGLASS_OFF:  # the reference separation X_ij, from the positions
+                    for a in range(dim):
+                        xr[a] = X[j, a] - X[i, a]
                 if hourglass == HOURGLASS_PAPER:
                     # [G eq. 27, 32]: errors projected on the current separation, central force
                     r2 = 0.0
                     for a in range(dim):
-                        xij[a] = dx[p, a] + d[j, a] - d[i, a]
+                        xij[a] = xr[a] + d[j, a] - d[i, a]
                         r2 += xij[a] * xij[a]
                     r = math.sqrt(r2)
                     di = 0.0
@@ -260,8 +266,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         fi = 0.0
                         fj = 0.0
                         for b in range(dim):
-                            fi += fs[i, a, b] * dx[p, b]
-                            fj += fs[j, a, b] * dx[p, b]
+                            fi += fs[i, a, b] * xr[b]
+                            fj += fs[j, a, b] * xr[b]
                         di += (fi - xij[a]) * xij[a]
                         dj += (fj - xij[a]) * xij[a]
                     if viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET:
@@ -273,12 +279,12 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for a in range(dim):
                             fi = 0.0
                             for b in range(dim):
-                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * dx[p, b]
+                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * xr[b]
                             gamma = fi - xij[a]
                             err2 += gamma * gamma
                             closing += gamma * xij[a]
                             approach += xij[a] * (v[j, a] - v[i, a])
-                            r0 += dx[p, a] * dx[p, a]
+                            r0 += xr[a] * xr[a]
                         r0 = math.sqrt(r0)
                         approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
                         e = max(math.sqrt(err2) / r0, 0.05)
@@ -293,7 +299,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         if bound:  # the damper's coefficient on the pair's closing speed
                             damper += scale * h * r2 * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h))
                     elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
-                        c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + hreg[p]))
+                        # the regularising length 0.1 h_ij, h_ij the pair's mean support
+                        c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + 0.1 * (0.5 * (support[i] + support[j]))))
                         for a in range(dim):
                             f_hg[i, a] += c * xij[a]
                         if bound:
@@ -301,12 +308,12 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                 elif hourglass == HOURGLASS_VARIATIONAL:
                     # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
                     for a in range(dim):
-                        xa = dx[p, a] + d[j, a] - d[i, a]
+                        xa = xr[a] + d[j, a] - d[i, a]
                         fi = 0.0
                         fj = 0.0
                         for b in range(dim):
-                            fi += fs[i, a, b] * dx[p, b]
-                            fj += fs[j, a, b] * dx[p, b]
+                            fi += fs[i, a, b] * xr[b]
+                            fj += fs[j, a, b] * xr[b]
                         f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
                     stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
             if bound and hourglass == HOURGLASS_PAPER:
@@ -373,9 +380,9 @@ def stress_at(dim, law, reference, failure, i, fs, Fr, w, c, state, trial, damag
 
 
 @njit(cache=True)
-def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, body, b, hgc, hreg):
-    """Per-pair hourglass coefficients c_ij and (paper form) the regularising lengths
-    0.1 h_ij, written into hgc and hreg for the rows of body b.
+def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, body, b, hgc):
+    """Per-pair hourglass coefficients c_ij, written into hgc for the rows of body b (the
+    paper form's regularising length 0.1 h_ij is formed by the force stage).
 
     V_i is the particle's physical volume and V_j W_ij the kernel weight, which uses the
     d-dimensional measure (area in 2D, length in 1D) so that the force is in newtons.
@@ -390,7 +397,6 @@ def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, bod
                 dist2 += dx[p, a] * dx[p, a]
             if form == HOURGLASS_PAPER:
                 hgc[p] = 0.25 * alpha * weight / (dist2 + 0.01 * h[p] * h[p])
-                hreg[p] = 0.1 * h[p]
             else:
                 hgc[p] = VARIATIONAL_SCALE * 0.5 * alpha * weight / dist2
 
@@ -398,14 +404,16 @@ def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, bod
 @functools.lru_cache(maxsize=None)
 def hourglass_error(dim: int):
     """The disorder measure per particle for dimension `dim` (compiled for it: the loops over
-    components unrolled), a kernel (n, ptr, idx, dx, w, u, F, out, G): the part of the
-    neighbour separations that F does not explain, relative to the separations themselves
-    [G eq. 26],
-        eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ).
-    Zero for any affine motion; grows with hourglass modes and particle disorder."""
+    components unrolled), a kernel (n, ptr, idx, X, support, kind, u, F, out, G, xr): the part
+    of the neighbour separations that F does not explain, relative to the separations
+    themselves [G eq. 26],
+        eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ),
+    with X_ij and W_ij formed from the reference positions X, the supports and the kernel
+    (kernels.functions: `kind`). Zero for any affine motion; grows with hourglass modes and
+    particle disorder."""
 
     @njit(cache=True, _nrt=False)
-    def kernel(n, ptr, idx, dx, w, u, F, out, G):  # G: 3x3 scratch for F_i - I
+    def kernel(n, ptr, idx, X, support, kind, u, F, out, G, xr):  # G, xr: 3x3 and 3 scratch
         for i in range(n):
             for a in range(dim):
                 for b in range(dim):
@@ -414,12 +422,17 @@ def hourglass_error(dim: int):
             den = 0.0
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
+                r2 = 0.0
+                for a in range(dim):
+                    xr[a] = X[j, a] - X[i, a]
+                    r2 += xr[a] * xr[a]
+                w = value(kind, math.sqrt(r2), 0.5 * (support[i] + support[j]), dim)
                 for a in range(dim):
                     e = u[j, a] - u[i, a]
                     for b in range(dim):
-                        e -= G[a, b] * dx[p, b]
-                    num += w[p] * e * e
-                    den += w[p] * dx[p, a] * dx[p, a]
+                        e -= G[a, b] * xr[b]
+                    num += w * e * e
+                    den += w * xr[a] * xr[a]
             out[i] = math.sqrt(num / den) if den > 0 else 0.0
 
     return kernel
@@ -525,7 +538,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
 
 
 @njit(cache=True, _nrt=False)
-def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
+def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
                          f_visc, heating, step_limit):
     """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
     closing in (v_ij . x_ij < 0),
@@ -538,7 +551,7 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
     alike (Monaghan 1992's du_i/dt = 1/2 sum_j m_j Pi_ij v_ij . grad W_ij): `heating` [W].
     step_limit: at most r / w over the closing pairs, w = -v_ij . x_ij / r the closing speed
     and r = |x_ij| (the time they take to meet at that speed: `stable_time_step`)."""
-    dim = dx.shape[1]
+    dim = X.shape[1]
     for i in range(lo, hi):
         heating[i] = 0.0
         for a in range(dim):
@@ -548,7 +561,7 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
             approach = 0.0
             r2 = 0.0
             for a in range(dim):
-                xa = dx[p, a] + d[j, a] - d[i, a]
+                xa = (X[j, a] - X[i, a]) + d[j, a] - d[i, a]
                 approach += xa * (v[j, a] - v[i, a])
                 r2 += xa * xa
             if approach >= 0.0:

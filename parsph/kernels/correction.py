@@ -221,7 +221,7 @@ class KeptPairs:
         self.eta, weighted = hessian if hessian else (0.0, True)
         self.passes = _compile_kept(dim, self.eta > 0, weighted)
         self.ptr = np.zeros(rows + 1, np.int64)
-        self.idx = np.empty(size, np.int64)
+        self.idx = np.empty(size, np.int32)
         self.dx, self.g, self.g_rev = (np.empty((size, dim)) for _ in range(3))
         self.w, self.h, self.slope = np.empty(size), np.empty(size), np.empty(size)
         self.g_sum = np.empty((rows, dim))

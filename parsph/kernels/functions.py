@@ -260,6 +260,16 @@ def curvature(kind, r, h, dim):
 
 
 @njit(cache=True, inline="always")
+def value(kind, r, h, dim):
+    """W(r) of the kernel KERNEL_NAMES[kind], support radius h: the value `evaluate` gives."""
+    if kind == 0:
+        return cubic_spline_w(r, h, dim)
+    if kind == 1:
+        return wendland_c2_w(r, h, dim)
+    return spiky_w(r, h, dim)
+
+
+@njit(cache=True, inline="always")
 def value_and_slope(kind, r, h, dim):
     """(W(r), dW/dr) of the kernel KERNEL_NAMES[kind], support radius h; the cubic spline
     written out with one division (equal to cubic_spline_w, _dw to round-off)."""
