@@ -44,9 +44,8 @@ def quadrature(sim) -> tuple:
 def disorder(sim) -> np.ndarray:
     """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
     error, state = tlsph.hourglass_error(sim.state.dim), sim.state
-    return by_relation(sim, lambda r, out: error(
-        state.n_owned, r.ref.ptr, r.ref.idx, r.ref.X, state.support, KERNEL_NAMES.index(r.kernel), state.d, state.fs, out,
-        state.scratch33, np.empty(3)))
+    return by_relation(sim, lambda r, out: error(state.n_owned, r.ref.ptr, r.ref.idx, r.ref.dx, state.support,
+                                                 KERNEL_NAMES.index(r.kernel), state.d, state.fs, out, state.scratch33))
 
 
 def spacing_ratio(sim) -> np.ndarray:

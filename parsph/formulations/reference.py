@@ -35,9 +35,7 @@ class ReferenceData:
 
     ptr: np.ndarray
     idx: np.ndarray  # 32-bit neighbour rows
-    # the reference positions of the local particles (the pairs' X_j - X_i, their kernel values
-    # and regularising lengths are formed from them where they are needed, not stored)
-    X: np.ndarray
+    dx: np.ndarray  # X_j - X_i in the reference (its kernel values and lengths are formed from it)
     g: np.ndarray
     g_rev: np.ndarray
     g_sum: np.ndarray
@@ -116,7 +114,8 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     idx = np.ascontiguousarray(pairs.idx[:end], dtype=np.int32)
     if np.isnan(ref.g_rev[:end]).any():
         raise ParsphError("internal: a neighbour of an owned particle has no reference row")
-    rows = pairs.row_of_pair()[:end]
+    if not eta > 0:
+        ref.rev = None  # only the stabilisation's reverse values need it: freed before hgc is made
     hgc = np.zeros(0)
     if any(o.hourglass_form for o in options):
         hgc = np.zeros(end)
@@ -128,6 +127,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     q = q_rev = np.zeros((0, dim))
     gh = gh_rev = np.zeros(0)
     q_sum = np.zeros((0, dim))
+    rows = pairs.row_of_pair()[:end] if eta > 0 else None
     if eta > 0:
         hvec = 0.5 * support[: n_rows]
         row_all = pairs.row_of_pair()
@@ -138,11 +138,7 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         q, gh = np.ascontiguousarray(q_all[:end]), np.ascontiguousarray(gh_all[:end])
         q_rev, gh_rev = reverse_values(q_all, rev), reverse_values(gh_all, rev)
         q_sum = np.stack([np.bincount(rows, q[:, a], n) for a in range(dim)], axis=1)
-    d2 = np.einsum("pa,pa->p", ref.dx[:end], ref.dx[:end])
-    min_spacing = np.full(n, np.inf)
-    has = np.diff(ptr) > 0
-    if end:
-        min_spacing[has] = np.sqrt(np.minimum.reduceat(d2, ptr[:-1][has]))
+    min_spacing = ref.nearest[:n].copy()
     stiffening = np.ones(n)
     if eta > 0 and end:
         # the stabilised gradient g + q - gh (sum g) against g, row by row: the fastest mode's
@@ -154,8 +150,8 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
-        ptr=ptr, idx=idx, X=X, g=np.ascontiguousarray(ref.g[:end]), g_rev=np.ascontiguousarray(ref.g_rev[:end]),
-        g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum,
+        ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), g=np.ascontiguousarray(ref.g[:end]),
+        g_rev=np.ascontiguousarray(ref.g_rev[:end]), g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum,
         gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
 
 
@@ -180,7 +176,7 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
     if stabilised:
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
-        ptr=ptr, idx=idx, X=X, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
+        ptr=ptr, idx=idx, dx=dx, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
         q=kept.q[:end] if stabilised else np.zeros((0, dim)),
         q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
         q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),

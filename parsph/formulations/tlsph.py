@@ -136,12 +136,11 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
     """kinematics_stress, stage 1, for its switches (`variational`: the variational hourglass
     form's penalty and hourglass stress)."""
     @njit(cache=True, _nrt=False)
-    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, X, hgc, d, volume, youngs, c, state, trial, damage_state,
-                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, xr, dt):
+    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
+                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial) and (variational form)
-        hourglass penalty hg_psi; returns the first inverted particle or -1. X: the reference
-        positions (X_ij = X_j - X_i, formed here rather than stored per pair); xr: scratch."""
+        hourglass penalty hg_psi; returns the first inverted particle or -1."""
         first_bad = -1
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
@@ -166,19 +165,17 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                 for p in range(ptr[i], ptr[i + 1]):
                     j = idx[p]
                     k = hgc[p] * youngs[i]
-                    for a in range(dim):
-                        xr[a] = X[j, a] - X[i, a]
                     e2 = 0.0
                     for a in range(dim):
                         fx = 0.0
                         for b in range(dim):
-                            fx += fs[i, a, b] * xr[b]
-                        err[a] = fx - xr[a] - d[j, a] + d[i, a]
+                            fx += fs[i, a, b] * dx[p, b]
+                        err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
                         e2 += err[a] * err[a]
                     phi += 0.5 * k * e2
                     for a in range(dim):
                         for b in range(dim):
-                            VP[i, a, b] += k * err[a] * xr[b]
+                            VP[i, a, b] += k * err[a] * dx[p, b]
                 hg_psi[i] = phi
         return first_bad
 
@@ -189,8 +186,8 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
 def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, viscous: bool):
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
-    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, X, hgc, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, xr, v, plastic, support, kind, vc):
+    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, d, fs, VP, B, youngs,
+               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
         frequency (see `stable_time_step`). With `viscous`, a pair of which a particle's
@@ -250,14 +247,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                                 if pair_form:
                                     s += VP[i, a, b] * g[p, b]
                         f_int[i, a] += s
-                if hourglass != HOURGLASS_OFF:  # the reference separation X_ij, from the positions
-                    for a in range(dim):
-                        xr[a] = X[j, a] - X[i, a]
                 if hourglass == HOURGLASS_PAPER:
                     # [G eq. 27, 32]: errors projected on the current separation, central force
                     r2 = 0.0
                     for a in range(dim):
-                        xij[a] = xr[a] + d[j, a] - d[i, a]
+                        xij[a] = dx[p, a] + d[j, a] - d[i, a]
                         r2 += xij[a] * xij[a]
                     r = math.sqrt(r2)
                     di = 0.0
@@ -266,8 +260,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         fi = 0.0
                         fj = 0.0
                         for b in range(dim):
-                            fi += fs[i, a, b] * xr[b]
-                            fj += fs[j, a, b] * xr[b]
+                            fi += fs[i, a, b] * dx[p, b]
+                            fj += fs[j, a, b] * dx[p, b]
                         di += (fi - xij[a]) * xij[a]
                         dj += (fj - xij[a]) * xij[a]
                     if viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET:
@@ -279,12 +273,12 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for a in range(dim):
                             fi = 0.0
                             for b in range(dim):
-                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * xr[b]
+                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * dx[p, b]
                             gamma = fi - xij[a]
                             err2 += gamma * gamma
                             closing += gamma * xij[a]
                             approach += xij[a] * (v[j, a] - v[i, a])
-                            r0 += xr[a] * xr[a]
+                            r0 += dx[p, a] * dx[p, a]
                         r0 = math.sqrt(r0)
                         approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
                         e = max(math.sqrt(err2) / r0, 0.05)
@@ -308,12 +302,12 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                 elif hourglass == HOURGLASS_VARIATIONAL:
                     # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
                     for a in range(dim):
-                        xa = xr[a] + d[j, a] - d[i, a]
+                        xa = dx[p, a] + d[j, a] - d[i, a]
                         fi = 0.0
                         fj = 0.0
                         for b in range(dim):
-                            fi += fs[i, a, b] * xr[b]
-                            fj += fs[j, a, b] * xr[b]
+                            fi += fs[i, a, b] * dx[p, b]
+                            fj += fs[j, a, b] * dx[p, b]
                         f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
                     stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
             if bound and hourglass == HOURGLASS_PAPER:
@@ -404,16 +398,15 @@ def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, bod
 @functools.lru_cache(maxsize=None)
 def hourglass_error(dim: int):
     """The disorder measure per particle for dimension `dim` (compiled for it: the loops over
-    components unrolled), a kernel (n, ptr, idx, X, support, kind, u, F, out, G, xr): the part
-    of the neighbour separations that F does not explain, relative to the separations
+    components unrolled), a kernel (n, ptr, idx, dx, support, kind, u, F, out, G): the part of
+    the neighbour separations that F does not explain, relative to the separations
     themselves [G eq. 26],
         eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ),
-    with X_ij and W_ij formed from the reference positions X, the supports and the kernel
-    (kernels.functions: `kind`). Zero for any affine motion; grows with hourglass modes and
-    particle disorder."""
+    W_ij formed from X_ij, the supports and the kernel (kernels.functions: `kind`). Zero for
+    any affine motion; grows with hourglass modes and particle disorder."""
 
     @njit(cache=True, _nrt=False)
-    def kernel(n, ptr, idx, X, support, kind, u, F, out, G, xr):  # G, xr: 3x3 and 3 scratch
+    def kernel(n, ptr, idx, dx, support, kind, u, F, out, G):  # G: 3x3 scratch for F_i - I
         for i in range(n):
             for a in range(dim):
                 for b in range(dim):
@@ -424,15 +417,14 @@ def hourglass_error(dim: int):
                 j = idx[p]
                 r2 = 0.0
                 for a in range(dim):
-                    xr[a] = X[j, a] - X[i, a]
-                    r2 += xr[a] * xr[a]
+                    r2 += dx[p, a] * dx[p, a]
                 w = value(kind, math.sqrt(r2), 0.5 * (support[i] + support[j]), dim)
                 for a in range(dim):
                     e = u[j, a] - u[i, a]
                     for b in range(dim):
-                        e -= G[a, b] * xr[b]
+                        e -= G[a, b] * dx[p, b]
                     num += w * e * e
-                    den += w * xr[a] * xr[a]
+                    den += w * dx[p, a] * dx[p, a]
             out[i] = math.sqrt(num / den) if den > 0 else 0.0
 
     return kernel
@@ -538,7 +530,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
 
 
 @njit(cache=True, _nrt=False)
-def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
+def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
                          f_visc, heating, step_limit):
     """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
     closing in (v_ij . x_ij < 0),
@@ -551,7 +543,7 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolum
     alike (Monaghan 1992's du_i/dt = 1/2 sum_j m_j Pi_ij v_ij . grad W_ij): `heating` [W].
     step_limit: at most r / w over the closing pairs, w = -v_ij . x_ij / r the closing speed
     and r = |x_ij| (the time they take to meet at that speed: `stable_time_step`)."""
-    dim = X.shape[1]
+    dim = dx.shape[1]
     for i in range(lo, hi):
         heating[i] = 0.0
         for a in range(dim):
@@ -561,7 +553,7 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolum
             approach = 0.0
             r2 = 0.0
             for a in range(dim):
-                xa = (X[j, a] - X[i, a]) + d[j, a] - d[i, a]
+                xa = dx[p, a] + d[j, a] - d[i, a]
                 approach += xa * (v[j, a] - v[i, a])
                 r2 += xa * xa
             if approach >= 0.0:

@@ -45,6 +45,7 @@ class ReferencePairs:
     condition: np.ndarray  # (rows,) condition number of L_i
     rev: np.ndarray  # (npairs,) index of the pair (j, i), -1 if j has no row
     bad: np.ndarray  # rows whose L_i is singular or ill-conditioned (`tolerant`: not raised)
+    nearest: np.ndarray  # (rows,) each row's nearest neighbour distance (inf without one)
 
 
 @njit(cache=True)
@@ -163,7 +164,8 @@ def reference_pairs(
         where = ", ".join(f"{c:.6g}" for c in positions[row[p]])
         raise InputError(f"particles {int(gid[row[p]])} and {int(gid[pairs.idx[p]])} coincide at ({where})")
     h_pair = 0.5 * (support[row] + support[pairs.idx])
-    w, dwdr, _ = evaluate(kernel, dist, h_pair, dim)
+    del row  # the per-pair temporaries go as soon as they are used: they set the peak memory
+    w, dwdr = evaluate(kernel, dist, h_pair, dim)[:2]
     L = np.empty((rows, dim, dim))
     _correction_matrices(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, dim, L)
     counts = pairs.counts()
@@ -192,10 +194,15 @@ def reference_pairs(
     g = np.empty_like(dx)
     g_sum = np.empty((rows, dim))
     _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
+    nearest = np.full(rows, np.inf)
+    has = counts > 0
+    if has.any():
+        nearest[has] = np.minimum.reduceat(dist, pairs.ptr[:-1][has])
+    del dist, dwdr
     rev = reverse_index(pairs)
     g_rev = reverse_values(g, rev)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
-                          rev=rev, bad=np.flatnonzero(bad))
+                          rev=rev, bad=np.flatnonzero(bad), nearest=nearest)
 
 
 class KeptPairs:
