@@ -80,8 +80,9 @@ def first_piola(F, S, dim, P):
 
 @njit(cache=True, _nrt=False)  # not inlined: compiled once, shared by every stage that calls it
 def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
-    """P for the law `model` with its three constants (lam, mu, bulk; for Mooney-Rivlin
-    lambda, c1, c2; for Tait B, gamma, -); returns psi (NaN if J <= 0).
+    """P for the law `model` with its three constants (lam, mu, bulk); returns psi (NaN if
+    J <= 0). Mooney-Rivlin and Tait's fluid are functions of their own (`mooney_rivlin`,
+    `tait`), so that a stage of one of these laws compiles none of the others.
 
     Saint Venant-Kirchhoff [G eq. 19] (with the standard lam tr(E) I term):
         S = lam tr(E) I + 2 mu E,  psi = lam/2 tr(E)^2 + mu E:E,  E = (C - I)/2.
@@ -90,18 +91,7 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
     Nearly incompressible neo-Hookean [V §2.4.1] (Bonet & Wood):
         S = mu J^(-2/3) (I - I1/3 C^-1) + bulk J (J - 1) C^-1,
         psi = mu/2 (J^(-2/3) I1 - 3) + bulk/2 (J - 1)^2.
-    Compressible Mooney-Rivlin [R eq. 18], Kirchhoff stress from B = F F^T:
-        tau = (c1 + c2 I1) B - c2 B^2 - (c1 I3^(1/3) + 2 c2 I3^(2/3) - lambda ln I3) I,
-        psi = c1/2 (I1 - 3 I3^(1/3)) + c2/2 (I2 - 3 I3^(2/3)) + lambda/4 (ln I3)^2
-    (the energy whose derivative is [R]'s stress: 2 dpsi/dI1 = c1, 2 dpsi/dI2 = c2).
-    Tait's fluid [R eq. 77], rho / rho0 = 1 / J:
-        p = B (J^-gamma - 1),  P = -p J F^-T,  psi = B ((J^(1-gamma) - 1) / (gamma - 1) + J - 1)
-    (dpsi/dJ = -p; no shear stiffness: an isochoric motion is stress-free).
     """
-    if model == MOONEY_RIVLIN:
-        return _mooney_rivlin(F, dim, lam, mu, bulk, P, S, C, Cinv)
-    if model == TAIT_FLUID:
-        return _tait(F, dim, lam, mu, P, Cinv)
     right_cauchy_green(F, dim, C)
     if model == SAINT_VENANT_KIRCHHOFF:
         tr = 0.0
@@ -139,8 +129,12 @@ def stress(model, F, dim, lam, mu, bulk, P, S, C, Cinv):
 
 
 @njit(cache=True, _nrt=False)  # not inlined: the stages of the other laws do not compile it
-def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
-    """[R eq. 18] (see stress): P = tau F^-T; out of the model's dimensions B is 1."""
+def mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
+    """Compressible Mooney-Rivlin [R eq. 18], Kirchhoff stress from B = F F^T:
+        tau = (c1 + c2 I1) B - c2 B^2 - (c1 I3^(1/3) + 2 c2 I3^(2/3) - lambda ln I3) I,
+        psi = c1/2 (I1 - 3 I3^(1/3)) + c2/2 (I2 - 3 I3^(2/3)) + lambda/4 (ln I3)^2
+    (the energy whose derivative is [R]'s stress: 2 dpsi/dI1 = c1, 2 dpsi/dI2 = c2);
+    P = tau F^-T, psi returned (NaN if J <= 0); out of the model's dimensions B is 1."""
     J = det(F, dim)
     if not J > 0.0:
         return math.nan
@@ -167,9 +161,12 @@ def _mooney_rivlin(F, dim, lam, c1, c2, P, B, B2, Finv):
     return 0.5 * c1 * (i1 - 3.0 * cube) + 0.5 * c2 * (i2 - 3.0 * cube * cube) + 0.25 * lam * ln_i3 * ln_i3
 
 
-@njit(cache=True, _nrt=False)  # not inlined, as _mooney_rivlin
-def _tait(F, dim, b, gamma, P, Finv):
-    """[R eq. 77] (see stress)."""
+@njit(cache=True, _nrt=False)  # not inlined, as mooney_rivlin
+def tait(F, dim, b, gamma, P, Finv):
+    """Tait's fluid [R eq. 77], rho / rho0 = 1 / J:
+        p = B (J^-gamma - 1),  P = -p J F^-T,  psi = B ((J^(1-gamma) - 1) / (gamma - 1) + J - 1)
+    (dpsi/dJ = -p; no shear stiffness: an isochoric motion is stress-free); psi returned
+    (NaN if J <= 0)."""
     J = det(F, dim)
     if not J > 0.0:
         return math.nan

@@ -33,6 +33,8 @@ WORK = elastoplastic.WORK  # the most scratch matrices a law uses
 J2_PLASTICITY = elastoplastic.J2_PLASTICITY
 JOHNSON_COOK = johnson_cook.JOHNSON_COOK
 MIE_GRUNEISEN = mie_gruneisen.MIE_GRUNEISEN
+MOONEY_RIVLIN = elastic.MOONEY_RIVLIN
+TAIT_FLUID = elastic.TAIT_FLUID
 # the failure models as plain globals: a branch on a module's attribute is not folded away
 TENSILE = damage.TENSILE
 JOHNSON_COOK_FAILURE = johnson_cook_failure.JOHNSON_COOK_FAILURE
@@ -59,6 +61,10 @@ def update(law, F, dim, c, state, trial, i, P, work, dt):
         return johnson_cook.update(F, d, c, state, trial, i, P, work, dt)
     if law == MIE_GRUNEISEN:
         return mie_gruneisen.update(F, d, c, state, trial, i, P, work, dt)
+    if law == MOONEY_RIVLIN:
+        return elastic.mooney_rivlin(F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
+    if law == TAIT_FLUID:
+        return elastic.tait(F, dim, c[0], c[1], P, work[2])
     return elastic.stress(law, F, dim, c[0], c[1], c[2], P, work[0], work[1], work[2])
 
 
