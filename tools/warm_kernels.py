@@ -28,6 +28,8 @@ SCENES = (  # scene, overrides: the slowest to compile first
     ("taylor_jc", ("parameters.layers=8",)),  # Johnson-Cook, 3D, a rigid wall
     ("rubber_ring", ()),  # Mooney-Rivlin, the Galerkin shape functions
     ("funnel", ()),  # Tait's fluid, the Eulerian kernel, artificial viscosity
+    ("cylinder_bending_ul", ()),  # the updated reference's kept lists in 3D
+    ("bar1d_ul", ()),  # and in 1D
     ("flyer_plate", ()),  # Mie-Grüneisen (1D)
     ("bar1d", ()),  # Saint Venant-Kirchhoff, 1D
     ("patch_random", ()),  # the default scene
