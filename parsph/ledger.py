@@ -37,22 +37,47 @@ register(Field("viscous_heat", "scalar", owner="viscosity",
                doc="angular impulse (about the origin) of the forces between particles on the particle [N m s]"))
 
 
-@njit(cache=True)
-def add_impulses(dt, f_old, f_new, x_old, x_new, impulse, angular):
+@njit(cache=True, _nrt=False)
+def add_impulses(dt, f_old, f_new, X, u_old, u_new, impulse, angular):
     """impulse += dt/2 (f_old + f_new), angular += dt/2 (x_old x f_old + x_new x f_new),
-    row by row (angular (n, 1) in 2D: the out-of-plane component; (n, 0) in 1D)."""
+    x = X + u, row by row (angular (n, 1) in 2D: the out-of-plane component; (n, 0) in 1D)."""
     n, dim = f_new.shape
     for i in range(n):
         for a in range(dim):
             impulse[i, a] += 0.5 * dt * (f_old[i, a] + f_new[i, a])
         if dim == 2:
-            angular[i, 0] += 0.5 * dt * ((x_old[i, 0] * f_old[i, 1] - x_old[i, 1] * f_old[i, 0])
-                                      + (x_new[i, 0] * f_new[i, 1] - x_new[i, 1] * f_new[i, 0]))
+            x0, y0 = X[i, 0] + u_old[i, 0], X[i, 1] + u_old[i, 1]
+            x1, y1 = X[i, 0] + u_new[i, 0], X[i, 1] + u_new[i, 1]
+            angular[i, 0] += 0.5 * dt * ((x0 * f_old[i, 1] - y0 * f_old[i, 0]) + (x1 * f_new[i, 1] - y1 * f_new[i, 0]))
         elif dim == 3:
             for a in range(3):
                 b, c = (a + 1) % 3, (a + 2) % 3
-                angular[i, a] += 0.5 * dt * ((x_old[i, b] * f_old[i, c] - x_old[i, c] * f_old[i, b])
-                                             + (x_new[i, b] * f_new[i, c] - x_new[i, c] * f_new[i, b]))
+                angular[i, a] += 0.5 * dt * (((X[i, b] + u_old[i, b]) * f_old[i, c] - (X[i, c] + u_old[i, c]) * f_old[i, b])
+                                             + ((X[i, b] + u_new[i, b]) * f_new[i, c]
+                                                - (X[i, c] + u_new[i, c]) * f_new[i, b]))
+
+
+@njit(cache=True, _nrt=False)
+def step_work(c, f_old, f_new, du, out, dt, mass, v_half, dv, moved, force_old, force):
+    """out = c (f_old + f_new) du per particle and component: the trapezoidal work of a force
+    f over the step's displacement du (c = 1/2; -1/2 for the work a force absorbs). With
+    obstacles (dv with rows; else empty) it adds their work in the step as the
+    kick-drift-kick scheme sees it: the kinetic energy m dv (2 v_half + dv) / 2 their
+    velocity change dv takes from the mid-step velocity v_half, with the second half kick's
+    share dt/2 f_(n+1) . dv, and the work -(f_n + f_(n+1))/2 . moved of the step's forces
+    (force_old, force) over the displacement `moved` by which they put particles back on
+    their surfaces (zero where there was no contact); for a particle held at rest on a wall
+    it is zero. Each value is rounded as the expressions read, left to right."""
+    n, dim = out.shape
+    obstacles = dv.shape[0] > 0
+    for i in range(n):
+        for a in range(dim):
+            w = c * (f_old[i, a] + f_new[i, a]) * du[i, a]
+            if obstacles:
+                kinetic = 0.5 * mass[i] * dv[i, a] * (2.0 * v_half[i, a] + dv[i, a])
+                w = w + (kinetic + 0.5 * dt * force[i, a] * dv[i, a]
+                         - 0.5 * (force_old[i, a] + force[i, a]) * moved[i, a])
+            out[i, a] = w
 
 
 class Ledger:
@@ -186,10 +211,13 @@ class Ledger:
         a prescribed motion."""
         n, start = state.n_owned, self._start
         du = state.u[:n] - start["u"]
+        none = np.empty((0, state.dim))  # no obstacles
         for force in (f for f in state.forces if f.work):  # forces without a potential
             now = getattr(state, force.name)
             for b in (b for b in state.bodies if force.absorbs(b.formulation)):
-                work = -0.5 * (start[force.name][b.lo:b.hi] + now[b.lo:b.hi]) * du[b.lo:b.hi]
+                work = np.empty((b.hi - b.lo, state.dim))
+                step_work(-0.5, start[force.name][b.lo:b.hi], now[b.lo:b.hi], du[b.lo:b.hi], work, dt, np.empty(0), none,
+                          none, none, none, none)
                 self.totals[force.work][b.index].add(self.part(b, work))
         if state.viscous:
             state.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + state.viscous_heating)
@@ -198,29 +226,18 @@ class Ledger:
                 self.add(interaction.work, -0.5 * (start["dissipation"][interaction.name] + interaction.dissipation)
                          * du)
         self.external = conditions.external_force(state, t)
-        work = 0.5 * (start["external"] + self.external) * du
-        if start["obstacles"] is not None:
-            work = work + self._obstacle_work(state, dt, *start["obstacles"], start["force"])
+        work = np.empty_like(du)
+        v_half, dv, moved = start["obstacles"] if start["obstacles"] is not None else (none, none, none)
+        step_work(0.5, start["external"], self.external, du, work, dt, state.mass[:n], v_half, dv, moved,
+                  start["force"], state.force)
         self.add("external_work", work)
         if start["v"] is not None:
             v, v_old = state.v[:n], start["v"]
             self.add("external_work", np.where(conditions.bcs.mask, 0.5 * state.mass[:n, None] * (v * v - v_old * v_old), 0.0))
         A = state.particles.arrays
-        add_impulses(dt, start["internal"], state.internal_force, state.X[:n] + start["u"], state.X[:n] + state.u[:n],
+        add_impulses(dt, start["internal"], state.internal_force, state.X, start["u"], state.u,
                      A["internal_impulse"], A["internal_angular_impulse"].reshape(len(state.X), MOMENT_COMPONENTS[state.dim]))
         self._start = None
-
-    @staticmethod
-    def _obstacle_work(state, dt: float, v_half: np.ndarray, dv: np.ndarray, du: np.ndarray,
-                       force_old: np.ndarray) -> np.ndarray:
-        """The work of the obstacles in the step (per particle and component) as the
-        kick-drift-kick scheme sees it: the kinetic energy their velocity change dv takes
-        from the mid-step velocity v_half, with the second half kick's share dt/2 f_(n+1) . dv,
-        and the work -(f_n + f_(n+1))/2 . du of the step's forces over the displacement du by
-        which they put particles back on their surfaces (zero where there was no contact).
-        For a particle held at rest on a wall it is zero."""
-        kinetic = 0.5 * state.mass[: state.n_owned, None] * dv * (2.0 * v_half + dv)
-        return kinetic + 0.5 * dt * state.force * dv - 0.5 * (force_old + state.force) * du
 
     def items(self, sim) -> dict:
         """What this rank sums for each term of each body (arrays, or exact_sum.Exact running

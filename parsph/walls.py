@@ -24,9 +24,39 @@ Coulomb friction; its torque about its centre is the sum of the levers times the
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from parsph.exact_sum import sums
 from parsph.surfaces import Surface
+
+
+@njit(cache=True, _nrt=False)
+def _press(rows, gap, normal, velocity, u, v, mass, span, out, force):
+    """A plane's contact on the candidate `rows` with their signed `gap`s: each row inside
+    (gap < 0) is put back on the plane along its unit `normal`, its velocity relative to the
+    plane's `velocity` loses its approach (the component into the plane), and its force is
+    the impulse over `span`; writes the rows inside to `out` and their forces to `force`,
+    returns their number. The approach is summed component by component (numpy's einsum, of
+    the generic contact, adds 3 components as (0 + 2) + 1: an inclined 3D plane may differ from
+    it in the last bit; any 2D plane and a 3D plane along an axis are the same)."""
+    count = 0
+    dim = u.shape[1]
+    for k in range(len(rows)):
+        if not gap[k] < 0.0:
+            continue
+        r = rows[k]
+        approach = 0.0
+        for a in range(dim):
+            u[r, a] -= gap[k] * normal[a]
+            approach += (v[r, a] - velocity[a]) * normal[a]
+        if approach > 0.0:
+            approach = 0.0
+        for a in range(dim):
+            v[r, a] -= approach * normal[a]
+            force[count, a] = -(mass[r] * approach) * normal[a] / span
+        out[count] = r
+        count += 1
+    return count
 
 
 class Wall:
@@ -42,13 +72,27 @@ class Wall:
         self.lower = None if spec.lower is None else np.asarray(spec.lower, float)
         self.upper = None if spec.upper is None else np.asarray(spec.upper, float)
 
-    def contact(self, x: np.ndarray, t: float) -> tuple:
-        """(signed gaps, unit normals into the material) of the points x; gap < 0 inside."""
+    def gap(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The signed gaps of the points x; < 0 inside."""
         gap = (x - (self.point + self.velocity * t)) @ self.normal
         if self.lower is not None:
             outside = ~np.all((x >= self.lower) & (x <= self.upper), axis=1)
             gap = np.where(outside, np.inf, gap)
-        return gap, np.broadcast_to(self.normal, x.shape)
+        return gap
+
+    def contact(self, x: np.ndarray, t: float) -> tuple:
+        """(signed gaps, unit normals into the material) of the points x; gap < 0 inside."""
+        return self.gap(x, t), np.broadcast_to(self.normal, x.shape)
+
+    def press(self, X: np.ndarray, u: np.ndarray, v: np.ndarray, mass: np.ndarray, rows: np.ndarray, t: float,
+              span: float) -> tuple:
+        """The contact of the owned `rows` (Walls.enforce): (the rows inside, their forces).
+        The gaps are numpy's of all the rows in one array, as the obstacles' generic contact
+        has them: its matrix-vector product rounds a row's sum by the row's place in the array."""
+        gap = self.gap(X.take(rows, axis=0) + u.take(rows, axis=0), t)
+        out, force = np.empty(len(rows), np.int64), np.empty((len(rows), len(self.normal)))
+        count = _press(rows, gap, self.normal, self.velocity, u, v, mass, span, out, force)
+        return out[:count], force[:count]
 
 
 class Tool:
@@ -112,7 +156,10 @@ class Walls:
         for body in rigid_bodies:
             free[body.body.lo:body.body.hi] = True
         for k, item in enumerate(self.items):
-            sel = item.index[~free[item.index]]
+            sel = item.index[~free[item.index]] if rigid_bodies else item.index
+            if isinstance(item, Wall):  # compiled
+                self._rows[k], self.contacts[k] = item.press(X, u, v, mass, sel, t, span)
+                continue
             gap, normal = item.contact(X[sel] + u[sel], t)
             hit = gap < 0.0
             sel, gap, normal = sel[hit], gap[hit], normal[hit]
