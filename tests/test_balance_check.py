@@ -6,8 +6,6 @@ bodies, on one and two ranks."""
 
 from __future__ import annotations
 
-import math
-
 import h5py
 import numpy as np
 import pytest
