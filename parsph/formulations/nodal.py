@@ -153,7 +153,7 @@ class NodalFormulation(Formulation):
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
         dim = state.dim  # the kernels' scratch (they run without Numba's reference counting)
         scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
-        force_scratch = (np.empty(dim), np.empty(6), np.empty((3, 3)))
+        force_scratch = (np.empty(dim), np.empty(6), np.empty(6), np.empty((3, 3)))
         out = []
         motion = "fs" if self.updated else "F"  # the motion from the reference: F itself in the initial one
         if state.updated:  # d apart from u: the displacement since each body's reference

@@ -187,7 +187,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, tensor, v, plastic, support, kind, vc):
+               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, damping, tensor, v, plastic, support, kind,
+               vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
         frequency (see `stable_time_step`). With `viscous`, a pair of which a particle's
@@ -199,9 +200,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
             f_i += m_i m_j (-e alpha c0 mu / rho0) W'(|X_ij|) x_ij / (r + h/100),
             mu = h v / (r + h/10),  e = max(|gamma| / |X_ij|, 0.05),
         an artificial viscosity on the hourglass mode's closing (vc = alpha, c0, rho0, E,
-        column; scaled by E_i E_j / E^2, the damage's factors). Its dampers' rate, sum_j k_ij / m_i
-        with k_ij the force per unit closing speed, bounds the stable step as the springs' frequency
-        does (an explicit damper is stable for dt < 2 / rate). With
+        column; scaled by E_i E_j / E^2, the damage's factors). Its dampers bound the stable step
+        as the springs do (an explicit damper is stable for dt < 2 / rate): the damping matrix
+        is a Laplacian of pair coefficients k_ij along n_ij (the force per unit closing
+        speed), whose largest rate is at most max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i
+        (the springs' argument; `damping` accumulates the tensor). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -212,10 +215,12 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                 f_int[i, a] = 0.0
                 if hourglass != HOURGLASS_OFF:
                     f_hg[i, a] = 0.0
-            damper = 0.0
+            damped = False
             if hourglass != HOURGLASS_OFF:
                 for a in range(6):
                     stiffness[a] = 0.0
+                    if viscous:
+                        damping[a] = 0.0
             if force_form == FORCE_VIRTUAL_WORK:
                 for a in range(dim):
                     s = 0.0
@@ -290,8 +295,10 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             c = -scale * mu * slope / (r + 0.01 * h)
                             for a in range(dim):
                                 f_hg[i, a] += c * xij[a]
-                        if bound:  # the damper's coefficient on the pair's closing speed
-                            damper += scale * h * r2 * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h))
+                        if bound:  # the damper's coefficient on the pair's closing speed, along x_ij
+                            damped = True
+                            spring_tensor(damping, scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)),
+                                          xij, dim)
                     elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
                         # the regularising length 0.1 h_ij, h_ij the pair's mean support
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + 0.1 * (0.5 * (support[i] + support[j]))))
@@ -315,8 +322,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                     a, b = SYMMETRIC_PAIRS[k]
                     tensor[a, b] = tensor[b, a] = stiffness[k]
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
-                if viscous:  # an explicit damper is stable for dt below 2 / (its damping rate)
-                    omega_hg2[i] += (damper / mass[i]) ** 2
+                if damped:  # an explicit damper is stable for dt below 2 / (its damping rate)
+                    for k in range(6):
+                        a, b = SYMMETRIC_PAIRS[k]
+                        tensor[a, b] = tensor[b, a] = damping[k]
+                    omega_hg2[i] += (2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]) ** 2
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
 
