@@ -32,9 +32,6 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from scipy import integrate
-from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from parsph import expressions
 from parsph.errors import InputError
@@ -112,6 +109,7 @@ def _outlines(polylines: list) -> tuple:
 def _rotation(angles, dim: int) -> np.ndarray:
     """The matrix of `rotate`: [angle] in 2D, counter-clockwise; the rotation vector (the
     axis times the angle) in 3D; degrees."""
+    from scipy.spatial.transform import Rotation  # here: scipy takes a quarter of a second to import
     if dim == 2:
         return Rotation.from_euler("z", angles[0], degrees=True).as_matrix()[:2, :2]
     return Rotation.from_rotvec(angles, degrees=True).as_matrix()
@@ -142,6 +140,7 @@ class _Rate:
     def integral(self, t: float) -> np.ndarray:
         if self.fields is None:
             return self.value * t
+        from scipy import integrate  # here: scipy takes a quarter of a second to import
         return np.array([integrate.quad(lambda s, k=k: self(s)[k], 0.0, t, epsabs=0.0, epsrel=1e-12, limit=200)[0]
                          for k in range(len(self.fields))])
 
@@ -170,6 +169,7 @@ class Surface:
     def pose(self, t: float) -> tuple:
         """(centre, rotation matrix) at time t."""
         if self._pose[0] != t:
+            from scipy.spatial.transform import Rotation  # here: scipy takes a quarter of a second to import
             theta = self.omega_of.integral(t)
             R = Rotation.from_rotvec([0.0, 0.0, theta[0]]).as_matrix()[:2, :2] if self.dim == 2 else \
                 Rotation.from_rotvec(theta).as_matrix()
@@ -196,6 +196,7 @@ class Surface:
         used, local = np.unique(self.F[self.faces], return_inverse=True)
         self.local_V, self.local_F = self.V[used], local.reshape(-1, self.F.shape[1]).astype(np.int64)
         self.corners = corners[self.faces]
+        from scipy.spatial import cKDTree  # here: scipy takes a quarter of a second to import
         self.tree = cKDTree(self.corners.mean(axis=1)) if len(self.faces) else None
         self.reach = float(np.max(np.linalg.norm(self.corners - self.corners.mean(axis=1)[:, None], axis=2))) \
             if len(self.faces) else 0.0

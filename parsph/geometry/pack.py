@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 import shapely
-from scipy.spatial import cKDTree
 
 BAND = 3.0  # particles within BAND spacings of the boundary move
 NEIGHBOURS = 4.0  # those within NEIGHBOURS spacings take part (the deeper ones fixed)
@@ -51,6 +50,7 @@ def relax(X: np.ndarray, mobile: np.ndarray, h: float, distance, iterations: int
     """The positions X after `iterations` steps: each mobile particle pushed by its
     neighbours closer than h (weight 1 - r/h, at most h/4 a step), then any closer than h/2
     to the boundary or outside put h/2 inside it, on the line to its closest point."""
+    from scipy.spatial import cKDTree  # here: scipy.spatial takes a tenth of a second to import
     X = X.copy()
     moving = np.flatnonzero(mobile)
     for _ in range(iterations):

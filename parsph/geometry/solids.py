@@ -17,7 +17,6 @@ import re
 
 import numpy as np
 import shapely
-from scipy.spatial.transform import Rotation
 
 CIRCLE_SEGMENTS = 1024  # sides of a circle's polygon (its area made exactly pi r^2)
 AMBIGUOUS = (0.2, 0.8)  # generalised winding numbers that do not say inside or outside
@@ -144,6 +143,7 @@ def _affine(part, name, dim):
             c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
             R = np.array([[c, -s], [s, c]])
         else:
+            from scipy.spatial.transform import Rotation  # here: scipy takes a quarter of a second to import
             R = Rotation.from_rotvec(_vector(rot, f"{name}.rotate", 3), degrees=True).as_matrix()
         A = R @ A
     t = np.zeros(dim) if part.get("translate") is None else _vector(part["translate"], f"{name}.translate", dim)
@@ -250,6 +250,7 @@ class Cone:
                                      sections=n)
         factor = math.sqrt(2.0 * math.pi / (n * math.sin(2.0 * math.pi / n)))  # the n-gon's area made pi r^2
         m.apply_transform(np.diag([factor, factor, 1.0, 1.0]))
+        from scipy.spatial.transform import Rotation  # here: scipy takes a quarter of a second to import
         z = np.array([0.0, 0.0, 1.0])
         R = Rotation.align_vectors([self.axis], [z])[0].as_matrix()
         T = np.eye(4)
