@@ -142,6 +142,30 @@ def parsph(args, ranks: int = 1, timeout: float = CEILING, cwd=None, env=None) -
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
 
 
+def parsph_batch(commands: list, ranks: int, folder) -> list:
+    """Run the `parsph` command lines `commands` (argument lists) one after another in one
+    MPI job of `ranks` ranks (tests/mpi/cli_batch.py), files under `folder`; returns for
+    each a subprocess.CompletedProcess as `parsph` would: the ranks' highest exit code and
+    their standard output and error, concatenated in rank order."""
+    import json
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    cases = [{"argv": list(map(str, argv)), "out": str(folder / f"case{k}")} for k, argv in enumerate(commands)]
+    (folder / "cases.json").write_text(json.dumps(cases))
+    cmd = [mpiexec(), "-n", str(ranks), sys.executable, str(ROOT / "tests" / "mpi" / "cli_batch.py"),
+           str(folder / "cases.json"), str(folder / "results.json")]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    job = subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT, env=env)
+    assert job.returncode == 0 and (folder / "results.json").exists(), job.stdout + job.stderr
+    results = []
+    for case, codes in zip(cases, json.loads((folder / "results.json").read_text())):
+        out, err = ("".join(Path(f"{case['out']}.{r}.{kind}").read_text() for r in range(ranks))
+                    for kind in ("stdout", "stderr"))
+        results.append(subprocess.CompletedProcess(case["argv"], max(codes), out, err))
+    return results
+
+
 @pytest.fixture
 def run_parsph():
     return parsph

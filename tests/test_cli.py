@@ -17,7 +17,7 @@ from typing import Callable
 
 import pytest
 
-from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph
+from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph, parsph_batch
 
 
 # A small 2D scene (random particles in a patch) for the "zero particles" count.
@@ -349,29 +349,47 @@ def assert_bad_input(proc, expect: list[str]) -> None:
 
 
 def bad_input_params():
-    """Each case on one rank and under mpiexec -n 2. Scene errors (found by config.load, the
-    same code for `check` and `run`) are run as `check` on one rank and as `run` on two
-    ranks, to keep the suite fast (`run` imports the solver first: ~1 s more per case);
-    errors only `run` finds are run as `run` on both."""
+    """Each case on one rank: scene errors (found by config.load, the same code for `check`
+    and `run`) as `check`, errors only `run` finds as `run`. The cases under two ranks are
+    one test (test_bad_input_under_two_ranks_exit_2_with_one_clear_message)."""
     for name, case in BAD_INPUT.items():
-        commands = [("run", 1), ("run", 2)] if case.build else [("check", 1), ("run", 2)]
-        if not case.two_ranks:
-            commands = commands[:1]
-        for command, ranks in commands:
-            yield pytest.param(name, command, ranks, id=f"{name}-{command}-{ranks}rank{'s' * (ranks > 1)}",
-                               marks=[pytest.mark.mpi] if ranks > 1 else [])
+        command = "run" if case.build else "check"
+        yield pytest.param(name, command, id=f"{name}-{command}-1rank")
 
 
-@pytest.mark.parametrize(("name", "command", "ranks"), list(bad_input_params()))
-def test_bad_input_exit_2_with_one_clear_message(name, command, ranks, tmp_path):
+@pytest.mark.parametrize(("name", "command"), list(bad_input_params()))
+def test_bad_input_exit_2_with_one_clear_message(name, command, tmp_path):
     case = BAD_INPUT[name]
     path = case.make(tmp_path)
     out = tmp_path / "out"
     args = ["run", path, "--out", out, *QUICK] if command == "run" else ["check", path]
-    proc = parsph([*args, *case.args], ranks=ranks)
+    proc = parsph([*args, *case.args])
     assert_bad_input(proc, case.expect)
     assert proc.stdout == ""
     assert not (out / "history.h5").exists()  # nothing was run
+
+
+@pytest.mark.mpi
+def test_bad_input_under_two_ranks_exit_2_with_one_clear_message(tmp_path):
+    """Every case (but the variants of another) as `run` under mpiexec -n 2: exit code 2 on
+    every rank, one message from rank 0, nothing run. The cases run one after another in one
+    MPI job (conftest.parsph_batch): a job per case would spend most of its time starting."""
+    names = [name for name, case in BAD_INPUT.items() if case.two_ranks]
+    commands, outs = [], []
+    for name in names:
+        folder = tmp_path / name
+        folder.mkdir()
+        outs.append(folder / "out")
+        commands.append(["run", BAD_INPUT[name].make(folder), "--out", outs[-1], *QUICK, *BAD_INPUT[name].args])
+    failures = []
+    for name, out, proc in zip(names, outs, parsph_batch(commands, 2, tmp_path / "batch")):
+        try:
+            assert_bad_input(proc, BAD_INPUT[name].expect)
+            assert proc.stdout == "", proc.stdout
+            assert not (out / "history.h5").exists()  # nothing was run
+        except AssertionError as exc:
+            failures.append(f"{name}: {exc}")
+    assert len(names) > 30 and not failures, "\n\n".join(failures)
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
