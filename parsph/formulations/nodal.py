@@ -153,7 +153,7 @@ class NodalFormulation(Formulation):
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
         dim = state.dim  # the kernels' scratch (they run without Numba's reference counting)
         scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
-        force_scratch = (np.empty(dim), np.empty(6), np.empty(6), np.empty((3, 3)))
+        tensor = np.empty((3, 3))  # the row's spring tensor, for its largest eigenvalue
         out = []
         motion = "fs" if self.updated else "F"  # the motion from the reference: F itself in the initial one
         if state.updated:  # d apart from u: the displacement since each body's reference
@@ -229,7 +229,7 @@ class NodalFormulation(Formulation):
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, a["d"], a["fs"], a["VP"], a["B"], a["youngs"],
                         state.volume, state.mass, state.f_int, state.f_hg, running.stable.bound_hourglass, state.omega_hg2,
-                        *force_scratch, a["v"], a["plastic"], state.support, kind, constants)
+                        tensor, a["v"], a["plastic"], state.support, kind, constants)
         reads = tuple(force_fields[p] for p in force_neighbours)
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2"), force_row=True))

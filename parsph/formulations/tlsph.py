@@ -60,7 +60,6 @@ from parsph.formulations.base import CompiledOnce
 from parsph.kernels.functions import value, value_and_slope
 from parsph.materials import update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
-from parsph.materials.elastoplastic import SYMMETRIC_PAIRS
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
 # the reference of F: the initial configuration, an updated one [V §3.1], or the current
@@ -187,8 +186,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2, xij, stiffness, damping, tensor, v, plastic, support, kind,
-               vc):
+               volume, mass, f_int, f_hg, bound, omega_hg2, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
         frequency (see `stable_time_step`). With `viscous`, a pair of which a particle's
@@ -204,23 +202,21 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
         as the springs do (an explicit damper is stable for dt < 2 / rate): the damping matrix
         is a Laplacian of pair coefficients k_ij along n_ij (the force per unit closing
         speed), whose largest rate is at most max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i
-        (the springs' argument; `damping` accumulates the tensor). With
+        (the springs' argument). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
         uses particle i's correction for both terms and does not conserve linear momentum."""
         pair_form = force_form == FORCE_PAIR
         for i in range(lo, hi):
-            for a in range(dim):
-                f_int[i, a] = 0.0
-                if hourglass != HOURGLASS_OFF:
-                    f_hg[i, a] = 0.0
+            # the row's sums are kept in locals, (f0, f1, f2) of f_int, (h0, h1, h2) of f_hg and
+            # the spring and damper tensors (k*, c*: xx, yy, zz, xy, yz, xz), and stored once:
+            # the pair loop stores nothing, so the compiler keeps them and particle i's data in
+            # registers (the sums are the same, term by term in row order)
+            f0 = f1 = f2 = h0 = h1 = h2 = 0.0
+            k0 = k1 = k2 = k3 = k4 = k5 = 0.0
+            c0 = c1 = c2 = c3 = c4 = c5 = 0.0
             damped = False
-            if hourglass != HOURGLASS_OFF:
-                for a in range(6):
-                    stiffness[a] = 0.0
-                    if viscous:
-                        damping[a] = 0.0
             if force_form == FORCE_VIRTUAL_WORK:
                 for a in range(dim):
                     s = 0.0
@@ -229,7 +225,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             s += (VP[i, a, b] - B[i, a, b]) * g_sum[i, b] + VP[i, a, b] * q_sum[i, b]
                         else:
                             s += VP[i, a, b] * g_sum[i, b]
-                    f_int[i, a] = s
+                    f0, f1, f2 = _set(a, s, f0, f1, f2)
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
                 if force_form == FORCE_RLM:
@@ -238,7 +234,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         s = 0.0
                         for b in range(dim):
                             s += (VP[i, a, b] + ratio * VP[j, a, b]) * g[p, b]
-                        f_int[i, a] += s
+                        f0, f1, f2 = _add(a, s, f0, f1, f2)
                 else:
                     for a in range(dim):
                         s = 0.0
@@ -251,13 +247,15 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                                 s -= VP[j, a, b] * g_rev[p, b]
                                 if pair_form:
                                     s += VP[i, a, b] * g[p, b]
-                        f_int[i, a] += s
+                        f0, f1, f2 = _add(a, s, f0, f1, f2)
                 if hourglass == HOURGLASS_PAPER:
                     # [G eq. 27, 32]: errors projected on the current separation, central force
+                    x0 = x1 = x2 = 0.0
                     r2 = 0.0
                     for a in range(dim):
-                        xij[a] = dx[p, a] + d[j, a] - d[i, a]
-                        r2 += xij[a] * xij[a]
+                        xa = dx[p, a] + d[j, a] - d[i, a]
+                        x0, x1, x2 = _set(a, xa, x0, x1, x2)
+                        r2 += xa * xa
                     r = math.sqrt(r2)
                     di = 0.0
                     dj = 0.0
@@ -267,8 +265,9 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for b in range(dim):
                             fi += fs[i, a, b] * dx[p, b]
                             fj += fs[j, a, b] * dx[p, b]
-                        di += (fi - xij[a]) * xij[a]
-                        dj += (fj - xij[a]) * xij[a]
+                        xa = _get(a, x0, x1, x2)
+                        di += (fi - xa) * xa
+                        dj += (fj - xa) * xa
                     if viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET:
                         h = 0.5 * (support[i] + support[j])
                         r0 = 0.0
@@ -279,10 +278,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             fi = 0.0
                             for b in range(dim):
                                 fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * dx[p, b]
-                            gamma = fi - xij[a]
+                            xa = _get(a, x0, x1, x2)
+                            gamma = fi - xa
                             err2 += gamma * gamma
-                            closing += gamma * xij[a]
-                            approach += xij[a] * (v[j, a] - v[i, a])
+                            closing += gamma * xa
+                            approach += xa * (v[j, a] - v[i, a])
                             r0 += dx[p, a] * dx[p, a]
                         r0 = math.sqrt(r0)
                         approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
@@ -293,19 +293,23 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         if approach * closing < 0.0:
                             mu = h * approach / (r + 0.1 * h)
                             c = -scale * mu * slope / (r + 0.01 * h)
-                            for a in range(dim):
-                                f_hg[i, a] += c * xij[a]
+                            h0 += c * x0
+                            h1 += c * x1
+                            h2 += c * x2
                         if bound:  # the damper's coefficient on the pair's closing speed, along x_ij
                             damped = True
-                            spring_tensor(damping, scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)),
-                                          xij, dim)
+                            c0, c1, c2, c3, c4, c5 = spring_terms(
+                                scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)), x0, x1, x2,
+                                c0, c1, c2, c3, c4, c5)
                     elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
                         # the regularising length 0.1 h_ij, h_ij the pair's mean support
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + 0.1 * (0.5 * (support[i] + support[j]))))
-                        for a in range(dim):
-                            f_hg[i, a] += c * xij[a]
+                        h0 += c * x0
+                        h1 += c * x1
+                        h2 += c * x2
                         if bound:
-                            spring_tensor(stiffness, hgc[p] * (youngs[i] + youngs[j]) / r2, xij, dim)
+                            k0, k1, k2, k3, k4, k5 = spring_terms(hgc[p] * (youngs[i] + youngs[j]) / r2, x0, x1, x2,
+                                                                  k0, k1, k2, k3, k4, k5)
                 elif hourglass == HOURGLASS_VARIATIONAL:
                     # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
                     for a in range(dim):
@@ -315,36 +319,45 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for b in range(dim):
                             fi += fs[i, a, b] * dx[p, b]
                             fj += fs[j, a, b] * dx[p, b]
-                        f_hg[i, a] -= hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))
-                    stiffness[0] += hgc[p] * (youngs[i] + youngs[j])
+                        h0, h1, h2 = _add(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))), h0, h1, h2)
+                    k0 += hgc[p] * (youngs[i] + youngs[j])
+            for a in range(dim):
+                f_int[i, a] = _get(a, f0, f1, f2)
+                if hourglass != HOURGLASS_OFF:
+                    f_hg[i, a] = _get(a, h0, h1, h2)
             if bound and hourglass == HOURGLASS_PAPER:
-                for k in range(6):
-                    a, b = SYMMETRIC_PAIRS[k]
-                    tensor[a, b] = tensor[b, a] = stiffness[k]
+                tensor[0, 0], tensor[1, 1], tensor[2, 2] = k0, k1, k2
+                tensor[0, 1] = tensor[1, 0] = k3
+                tensor[1, 2] = tensor[2, 1] = k4
+                tensor[0, 2] = tensor[2, 0] = k5
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
                 if damped:  # an explicit damper is stable for dt below 2 / (its damping rate)
-                    for k in range(6):
-                        a, b = SYMMETRIC_PAIRS[k]
-                        tensor[a, b] = tensor[b, a] = damping[k]
+                    tensor[0, 0], tensor[1, 1], tensor[2, 2] = c0, c1, c2
+                    tensor[0, 1] = tensor[1, 0] = c3
+                    tensor[1, 2] = tensor[2, 1] = c4
+                    tensor[0, 2] = tensor[2, 0] = c5
                     omega_hg2[i] += (2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]) ** 2
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
-                omega_hg2[i] = 2.0 * stiffness[0] / mass[i]
+                omega_hg2[i] = 2.0 * k0 / mass[i]
 
     return CompiledOnce(forces, f"{COMPILED_SOURCE} {dim} {force_form} {hourglass} {hessian} {viscous}")
 
 
 @njit(cache=True, inline="always")
 def gradient_row(dim, i, base, ptr, idx, g, d, f):
-    """f[i] = I + sum_j (d_j - d_base) (x) g_ij over row i of (ptr, idx, g)."""
+    """f[i] = I + sum_j (d_j - d_base) (x) g_ij over row i of (ptr, idx, g), a row of f at a
+    time summed in locals (stored once: the same sums, term by term in row order)."""
     for a in range(dim):
-        for b in range(dim):
-            f[i, a, b] = 1.0 if a == b else 0.0
-    for p in range(ptr[i], ptr[i + 1]):
-        j = idx[p]
-        for a in range(dim):
-            du = d[j, a] - d[base, a]
+        s0 = 1.0 if a == 0 else 0.0
+        s1 = 1.0 if a == 1 else 0.0
+        s2 = 1.0 if a == 2 else 0.0
+        da = d[base, a]
+        for p in range(ptr[i], ptr[i + 1]):
+            du = d[idx[p], a] - da
             for b in range(dim):
-                f[i, a, b] += du * g[p, b]
+                s0, s1, s2 = _add(b, du * g[p, b], s0, s1, s2)
+        for b in range(dim):
+            f[i, a, b] = _get(b, s0, s1, s2)
 
 
 @njit(cache=True, inline="always")
@@ -473,16 +486,29 @@ def principal_stretches(F, dim, C):
 
 
 @njit(cache=True, inline="always")
-def spring_tensor(out, k, x, dim):
-    """Add k x x^T to the symmetric tensor out = (xx, yy, zz, xy, yz, xz), the order of SYMMETRIC_PAIRS."""
-    out[0] += k * x[0] * x[0]
-    if dim > 1:
-        out[1] += k * x[1] * x[1]
-        out[3] += k * x[0] * x[1]
-    if dim > 2:
-        out[2] += k * x[2] * x[2]
-        out[4] += k * x[1] * x[2]
-        out[5] += k * x[0] * x[2]
+def spring_terms(k, x0, x1, x2, t0, t1, t2, t3, t4, t5):
+    """(t0..t5) + k x x^T of x = (x0, x1, x2), the symmetric tensor's (xx, yy, zz, xy, yz, xz);
+    the components a lower dimension lacks are zero and add zero."""
+    return (t0 + k * x0 * x0, t1 + k * x1 * x1, t2 + k * x2 * x2, t3 + k * x0 * x1, t4 + k * x1 * x2,
+            t5 + k * x0 * x2)
+
+
+@njit(cache=True, inline="always")
+def _get(a, v0, v1, v2):
+    """Component a of (v0, v1, v2) (in a loop over a literal dimension the choice folds away)."""
+    return v0 if a == 0 else (v1 if a == 1 else v2)
+
+
+@njit(cache=True, inline="always")
+def _set(a, value, v0, v1, v2):
+    """(v0, v1, v2) with component a replaced by value."""
+    return (value, v1, v2) if a == 0 else ((v0, value, v2) if a == 1 else (v0, v1, value))
+
+
+@njit(cache=True, inline="always")
+def _add(a, value, v0, v1, v2):
+    """(v0, v1, v2) with value added to component a."""
+    return (v0 + value, v1, v2) if a == 0 else ((v0, v1 + value, v2) if a == 1 else (v0, v1, v2 + value))
 
 
 @njit(cache=True, _nrt=False)
