@@ -46,7 +46,7 @@ from parsph.formulations.base import CompiledOnce, Formulation, Running, Stage, 
 from parsph.formulations.nodal import EULERIAN
 from parsph.formulations.reference import PairOptions
 from parsph.formulations import tlsph
-from parsph.formulations.tlsph import gradient_row, stress_at
+from parsph.formulations.tlsph import added, component, gradient_row, stress_at
 from parsph.kernels import shape as kernel_shape
 from parsph.kernels.functions import KERNEL_NAMES
 from parsph.keys import Key, one_of
@@ -418,13 +418,18 @@ def compile_stages(dim: int, law: int, eulerian: bool = False):
         """f_I -= sum_q w_q P_q grad N_I(X_q) over one set of integration points, for
         particles lo..hi-1."""
         for i in range(lo, hi):
+            f0 = f_int[i, 0]  # the row's sums in locals, stored once (tlsph's `forces`)
+            f1 = f_int[i, 1] if dim > 1 else 0.0
+            f2 = f_int[i, 2] if dim > 2 else 0.0
             for p in range(ptr[i], ptr[i + 1]):
                 q = idx[p]
                 for a in range(dim):
                     s = 0.0
                     for b in range(dim):
                         s += VP[q, a, b] * g[p, b]
-                    f_int[i, a] -= s
+                    f0, f1, f2 = added(a, -s, f0, f1, f2)
+            for a in range(dim):
+                f_int[i, a] = component(a, f0, f1, f2)
 
     variant = f"{COMPILED_SOURCE} {dim} {law} {eulerian}"
     return CompiledOnce(kinematics_stress, variant), CompiledOnce(forces, variant)

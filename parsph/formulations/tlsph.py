@@ -143,16 +143,18 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
         first_bad = -1
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
-            if hessian:
+            if hessian:  # a row of fs at a time, summed in locals (as in gradient_row)
                 for a in range(dim):
-                    for b in range(dim):
-                        fs[i, a, b] = f[i, a, b]
-                for p in range(ptr[i], ptr[i + 1]):
-                    j = idx[p]
-                    for a in range(dim):
+                    s0 = f[i, a, 0]
+                    s1 = f[i, a, 1] if dim > 1 else 0.0
+                    s2 = f[i, a, 2] if dim > 2 else 0.0
+                    for p in range(ptr[i], ptr[i + 1]):
+                        j = idx[p]
                         dd = d[j, a] - d[i, a]
                         for b in range(dim):
-                            fs[i, a, b] += dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p]
+                            s0, s1, s2 = added(b, dd * q[p, b] - (f[j, a, b] - f[i, a, b]) * gh[p], s0, s1, s2)
+                    for b in range(dim):
+                        fs[i, a, b] = component(b, s0, s1, s2)
             else:
                 gradient_row(dim, i, i, ptr, idx, g, d, fs)
             if stress_at(dim, law, reference, failure, i, fs, Fr, volume[i], c, state, trial, damage_state,
@@ -225,7 +227,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             s += (VP[i, a, b] - B[i, a, b]) * g_sum[i, b] + VP[i, a, b] * q_sum[i, b]
                         else:
                             s += VP[i, a, b] * g_sum[i, b]
-                    f0, f1, f2 = _set(a, s, f0, f1, f2)
+                    f0, f1, f2 = replaced(a, s, f0, f1, f2)
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
                 if force_form == FORCE_RLM:
@@ -234,7 +236,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         s = 0.0
                         for b in range(dim):
                             s += (VP[i, a, b] + ratio * VP[j, a, b]) * g[p, b]
-                        f0, f1, f2 = _add(a, s, f0, f1, f2)
+                        f0, f1, f2 = added(a, s, f0, f1, f2)
                 else:
                     for a in range(dim):
                         s = 0.0
@@ -247,14 +249,14 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                                 s -= VP[j, a, b] * g_rev[p, b]
                                 if pair_form:
                                     s += VP[i, a, b] * g[p, b]
-                        f0, f1, f2 = _add(a, s, f0, f1, f2)
+                        f0, f1, f2 = added(a, s, f0, f1, f2)
                 if hourglass == HOURGLASS_PAPER:
                     # [G eq. 27, 32]: errors projected on the current separation, central force
                     x0 = x1 = x2 = 0.0
                     r2 = 0.0
                     for a in range(dim):
                         xa = dx[p, a] + d[j, a] - d[i, a]
-                        x0, x1, x2 = _set(a, xa, x0, x1, x2)
+                        x0, x1, x2 = replaced(a, xa, x0, x1, x2)
                         r2 += xa * xa
                     r = math.sqrt(r2)
                     di = 0.0
@@ -265,7 +267,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for b in range(dim):
                             fi += fs[i, a, b] * dx[p, b]
                             fj += fs[j, a, b] * dx[p, b]
-                        xa = _get(a, x0, x1, x2)
+                        xa = component(a, x0, x1, x2)
                         di += (fi - xa) * xa
                         dj += (fj - xa) * xa
                     if viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET:
@@ -278,7 +280,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             fi = 0.0
                             for b in range(dim):
                                 fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * dx[p, b]
-                            xa = _get(a, x0, x1, x2)
+                            xa = component(a, x0, x1, x2)
                             gamma = fi - xa
                             err2 += gamma * gamma
                             closing += gamma * xa
@@ -319,12 +321,12 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for b in range(dim):
                             fi += fs[i, a, b] * dx[p, b]
                             fj += fs[j, a, b] * dx[p, b]
-                        h0, h1, h2 = _add(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))), h0, h1, h2)
+                        h0, h1, h2 = added(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))), h0, h1, h2)
                     k0 += hgc[p] * (youngs[i] + youngs[j])
             for a in range(dim):
-                f_int[i, a] = _get(a, f0, f1, f2)
+                f_int[i, a] = component(a, f0, f1, f2)
                 if hourglass != HOURGLASS_OFF:
-                    f_hg[i, a] = _get(a, h0, h1, h2)
+                    f_hg[i, a] = component(a, h0, h1, h2)
             if bound and hourglass == HOURGLASS_PAPER:
                 tensor[0, 0], tensor[1, 1], tensor[2, 2] = k0, k1, k2
                 tensor[0, 1] = tensor[1, 0] = k3
@@ -355,9 +357,9 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
         for p in range(ptr[i], ptr[i + 1]):
             du = d[idx[p], a] - da
             for b in range(dim):
-                s0, s1, s2 = _add(b, du * g[p, b], s0, s1, s2)
+                s0, s1, s2 = added(b, du * g[p, b], s0, s1, s2)
         for b in range(dim):
-            f[i, a, b] = _get(b, s0, s1, s2)
+            f[i, a, b] = component(b, s0, s1, s2)
 
 
 @njit(cache=True, inline="always")
@@ -494,19 +496,19 @@ def spring_terms(k, x0, x1, x2, t0, t1, t2, t3, t4, t5):
 
 
 @njit(cache=True, inline="always")
-def _get(a, v0, v1, v2):
+def component(a, v0, v1, v2):
     """Component a of (v0, v1, v2) (in a loop over a literal dimension the choice folds away)."""
     return v0 if a == 0 else (v1 if a == 1 else v2)
 
 
 @njit(cache=True, inline="always")
-def _set(a, value, v0, v1, v2):
+def replaced(a, value, v0, v1, v2):
     """(v0, v1, v2) with component a replaced by value."""
     return (value, v1, v2) if a == 0 else ((v0, value, v2) if a == 1 else (v0, v1, value))
 
 
 @njit(cache=True, inline="always")
-def _add(a, value, v0, v1, v2):
+def added(a, value, v0, v1, v2):
     """(v0, v1, v2) with value added to component a."""
     return (v0 + value, v1, v2) if a == 0 else ((v0, v1 + value, v2) if a == 1 else (v0, v1, v2 + value))
 
@@ -581,9 +583,8 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
     and r = |x_ij| (the time they take to meet at that speed: `stable_time_step`)."""
     dim = dx.shape[1]
     for i in range(lo, hi):
-        heating[i] = 0.0
-        for a in range(dim):
-            f_visc[i, a] = 0.0
+        f0 = f1 = f2 = heat = 0.0  # the row's sums, stored once (as in `forces`)
+        limit = step_limit[i]
         for p in range(ptr[i], ptr[i + 1]):
             j = idx[p]
             approach = 0.0
@@ -594,12 +595,16 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
                 r2 += xa * xa
             if approach >= 0.0:
                 continue
-            step_limit[i] = min(step_limit[i], -r2 / approach)
+            limit = min(limit, -r2 / approach)
             length = 0.25 * (support[i] + support[j])
             mu = length * approach / (r2 + 0.01 * length * length)
             pi = (-alpha * c0 * mu + beta * mu * mu) / (0.5 * density * (1.0 / J[i] + 1.0 / J[j]))
             rho_i, rho_j = mass[i] / gvolume[i], mass[j] / gvolume[j]
             for a in range(dim):
                 f = 0.5 * pi * (mass[i] * rho_j * g[p, a] - mass[j] * rho_i * g_rev[p, a])
-                f_visc[i, a] -= f
-                heating[i] -= 0.5 * f * (v[j, a] - v[i, a])
+                f0, f1, f2 = added(a, -f, f0, f1, f2)
+                heat -= 0.5 * f * (v[j, a] - v[i, a])
+        for a in range(dim):
+            f_visc[i, a] = component(a, f0, f1, f2)
+        heating[i] = heat
+        step_limit[i] = limit
