@@ -46,12 +46,13 @@ from parsph.formulations.base import CompiledOnce, Formulation, Running, Stage, 
 from parsph.formulations.nodal import EULERIAN
 from parsph.formulations.reference import PairOptions
 from parsph.formulations import tlsph
-from parsph.formulations.tlsph import added, component, gradient_row, stress_at
+from parsph.formulations.tlsph import gradient_row, stress_at
 from parsph.kernels import shape as kernel_shape
 from parsph.kernels.functions import KERNEL_NAMES
 from parsph.keys import Key, one_of
 from parsph.materials import update
 from parsph.relations import KeptRelation, Relation, find_relation
+from parsph.small_vectors import added, component
 
 STRESS_POINTS, GAUSS_POINTS = "stress_points", "gauss_points"
 

@@ -60,6 +60,7 @@ from parsph.formulations.base import CompiledOnce
 from parsph.kernels.functions import value, value_and_slope
 from parsph.materials import update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
+from parsph.small_vectors import added, component, replaced
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
 # the reference of F: the initial configuration, an updated one [V §3.1], or the current
@@ -493,24 +494,6 @@ def spring_terms(k, x0, x1, x2, t0, t1, t2, t3, t4, t5):
     the components a lower dimension lacks are zero and add zero."""
     return (t0 + k * x0 * x0, t1 + k * x1 * x1, t2 + k * x2 * x2, t3 + k * x0 * x1, t4 + k * x1 * x2,
             t5 + k * x0 * x2)
-
-
-@njit(cache=True, inline="always")
-def component(a, v0, v1, v2):
-    """Component a of (v0, v1, v2) (in a loop over a literal dimension the choice folds away)."""
-    return v0 if a == 0 else (v1 if a == 1 else v2)
-
-
-@njit(cache=True, inline="always")
-def replaced(a, value, v0, v1, v2):
-    """(v0, v1, v2) with component a replaced by value."""
-    return (value, v1, v2) if a == 0 else ((v0, value, v2) if a == 1 else (v0, v1, value))
-
-
-@njit(cache=True, inline="always")
-def added(a, value, v0, v1, v2):
-    """(v0, v1, v2) with value added to component a."""
-    return (v0 + value, v1, v2) if a == 0 else ((v0, v1 + value, v2) if a == 1 else (v0, v1, v2 + value))
 
 
 @njit(cache=True, _nrt=False)
