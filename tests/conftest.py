@@ -219,12 +219,32 @@ def assert_it_happened(out, ranks: int = 1) -> None:
             assert owners == set(range(ranks)), f"{out}: particles only on ranks {sorted(owners)}"
 
 
+def _compare_outputs():
+    """tools/compare_outputs.py as a module (loaded once per test process)."""
+    import importlib.util
+
+    module = sys.modules.get("parsph_tools_compare_outputs")
+    if module is None:
+        spec = importlib.util.spec_from_file_location("parsph_tools_compare_outputs",
+                                                      ROOT / "tools" / "compare_outputs.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        sys.modules[spec.name] = module
+    return module
+
+
 def assert_identical_outputs(*outs) -> None:
     """tools/compare_outputs.py finds every history series and the final state of the runs
-    in `outs` identical."""
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *map(str, outs)],
-                          capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
-    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+    in `outs` identical. Its main is called in this process (what `python
+    tools/compare_outputs.py OUTS` prints and returns, without starting Python and importing
+    h5py for each comparison)."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = _compare_outputs().main(list(map(str, outs)))
+    assert code == 0 and "identical" in out.getvalue(), out.getvalue() + err.getvalue()
 
 
 # ---- MPI jobs with more ranks than cores
