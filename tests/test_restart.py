@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import CEILING, ROOT, RUNS, kill_processes_mentioning, mpiexec, parsph, wait_for
+from conftest import CEILING, ROOT, RUNS, kill_processes_mentioning, mpiexec, parsph, parsph_batch, wait_for
 from parsph.io import read_history, read_snapshots
 
 FIELDS = '["position","velocity","J"]'
@@ -112,33 +112,42 @@ def test_plastic_state_restart_continues_bit_for_bit(tmp_path, scene):
         assert np.array_equal(ha[name], hb[name]), name
 
 
+@pytest.mark.mpi
 def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
     out = tmp_path / "run"
     run(out, 1, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10")
-    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest",
-                   "--set", "material.density=2.0", "--set", "formulation.hourglass=10"])
-    assert proc.returncode == 2
-    assert "material.density" in proc.stderr and "formulation.hourglass" in proc.stderr
-    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.end=0.4"])
+    # the refused restart and the allowed one one after another in one MPI job (conftest.parsph_batch)
+    refusal, proc = parsph_batch([
+        ["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest",
+         "--set", "material.density=2.0", "--set", "formulation.hourglass=10"],
+        ["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+         *PATCH, "--set", "time.end=0.4"]], 1, tmp_path / "batch")
+    assert refusal.returncode == 2
+    assert "material.density" in refusal.stderr and "formulation.hourglass" in refusal.stderr
     assert proc.returncode == 0, proc.stderr
     with h5py.File(out / "history.h5", "r") as f:
         assert f["time"][-1] >= 0.4
 
 
-@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [1, 2])
 def test_restart_refusal_names_the_changed_keys_of_bodies_and_contact(tmp_path, ranks):
     out = tmp_path / "run"
-    run(out, ranks, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10", scene="bars_impact")
-    proc = parsph(["run", RUNS / "bars_impact.toml", "--out", out, "--restart", "latest", *PATCH,
-                   "--set", "contact.0.stiffness=2.0", "--set", "bodies.1.material.density=7000.0"], ranks=ranks)
+    # the run and the refused restart one after another in one MPI job (conftest.parsph_batch)
+    first, proc = parsph_batch([
+        ["run", RUNS / "bars_impact.toml", "--out", out, "--quiet", *PATCH, "--set", "time.max_steps=20",
+         "--set", "output.checkpoint_every=10"],
+        ["run", RUNS / "bars_impact.toml", "--out", out, "--restart", "latest", *PATCH,
+         "--set", "contact.0.stiffness=2.0", "--set", "bodies.1.material.density=7000.0"]], ranks, tmp_path / "batch")
+    assert first.returncode == 0, first.stderr
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.count("parsph: error") == 1, proc.stderr
     assert "differs from checkpoint" in proc.stderr
     assert "in bodies.1.material.density, contact.0.stiffness;" in proc.stderr, proc.stderr
 
 
-@pytest.mark.parametrize("ranks", [1, pytest.param(3, marks=pytest.mark.mpi)])
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [1, 3])
 def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path, ranks):
     """The ranks hash the file's chunks among them: a changed last velocity (the end of the
     file) and a truncated file are found, and every rank refuses the file."""
@@ -157,11 +166,13 @@ def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp
     newest.write_bytes(bytes(data))
     middle = folder / names[-2]
     middle.write_bytes(middle.read_bytes()[:2000])
-    for path, why in ((newest, "is damaged"), (middle, "is damaged or truncated")):
-        proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", path], ranks=ranks)
-        assert proc.returncode == 2 and why in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
-    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.max_steps=40"], ranks=ranks)
+    # the two refusals and the restart one after another in one MPI job (conftest.parsph_batch)
+    commands = [["run", RUNS / "patch_random.toml", "--out", out, "--restart", path] for path in (newest, middle)]
+    commands.append(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+                     *PATCH, "--set", "time.max_steps=40"])
+    *refusals, proc = parsph_batch(commands, ranks, tmp_path / "batch")
+    for refusal, why in zip(refusals, ("is damaged", "is damaged or truncated")):
+        assert refusal.returncode == 2 and why in refusal.stderr and "Traceback" not in refusal.stderr, refusal.stderr
     assert proc.returncode == 0, proc.stderr
     assert "skipping checkpoint" in proc.stdout
     assert "step_00000010.h5" in proc.stdout.split("restarting from")[1].splitlines()[0]
