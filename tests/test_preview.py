@@ -11,7 +11,7 @@ import meshio
 import numpy as np
 import pytest
 
-from conftest import RUNS, parsph
+from conftest import RUNS, parsph, parsph_batch
 from parsph import preview
 from parsph.walls import Tool
 from physics import typed
@@ -86,23 +86,33 @@ def test_what_is_written_is_what_a_run_starts_from(scene, tmp_path):
     assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(shown["gid"])
 
 
-@pytest.mark.parametrize("ranks", RANKS)
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [1, 2])
 def test_bad_input_and_an_occupied_output_directory(ranks, tmp_path):
-    bad = parsph(["preview", RUNS / "punch.toml", "--out", tmp_path / "p", "--set", "material.density=-1"], ranks=ranks)
+    """Bad input is refused; a directory holding a preview is refused, and kept when the
+    scene given with --overwrite is bad; a good one with --overwrite replaces it. The
+    command lines run one after another in two MPI jobs (conftest.parsph_batch): the first
+    writes the previews `p` and `q`, the second runs into them."""
+    p, q = tmp_path / "p", tmp_path / "q"
+    punch = RUNS / "punch.toml"
+    bad, missing, *written = parsph_batch([["preview", punch, "--out", p, "--set", "material.density=-1"],
+                                           ["preview", tmp_path / "none.toml"],
+                                           ["preview", punch, "--out", p], ["preview", punch, "--out", q]],
+                                          ranks, tmp_path / "batch1")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and bad.stdout == ""
     assert bad.stderr.count("parsph: error: material.density must be > 0") == 1, bad.stderr
-    missing = parsph(["preview", tmp_path / "none.toml"], ranks=ranks)
     assert missing.returncode == 2 and missing.stderr.count("scene file not found") == 1
-    out = tmp_path / "p"
-    run_preview(out, "punch", ranks)
-    before = (out / "particles.h5").read_bytes()
-    again = parsph(["preview", RUNS / "punch.toml", "--out", out], ranks=ranks)
+    for proc in written:
+        assert proc.returncode == 0, proc.stderr
+    before = {out: (out / "particles.h5").read_bytes() for out in (p, q)}
+    again, worse, better = parsph_batch([["preview", punch, "--out", p],
+                                         ["preview", punch, "--out", p, "--overwrite", "--set", "kernel.support=0"],
+                                         ["preview", punch, "--out", q, "--overwrite", "--set", "parameters.n=3"]],
+                                        ranks, tmp_path / "batch2")
     assert again.returncode == 2 and again.stderr.count("already holds a preview") == 1
-    worse = parsph(["preview", RUNS / "punch.toml", "--out", out, "--overwrite", "--set", "kernel.support=0"],
-                   ranks=ranks)
-    assert worse.returncode == 2 and (out / "particles.h5").read_bytes() == before  # kept: the new scene is bad
-    run_preview(out, "punch", ranks, "--overwrite", "--set", "parameters.n=3")
-    assert (out / "particles.h5").read_bytes() != before
+    assert worse.returncode == 2 and (p / "particles.h5").read_bytes() == before[p]  # kept: the new scene is bad
+    assert better.returncode == 0, better.stderr
+    assert (q / "particles.h5").read_bytes() != before[q]
 
 
 def test_a_tool_is_its_rounded_box():
