@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph, wait_for
+from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph, parsph_batch, wait_for
 
 HISTORY = ["--set", "output.history_every=5", "--set", "output.history_interval=0.0"]
 
@@ -94,14 +94,16 @@ def _start(args):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 
+@pytest.mark.mpi
 def test_a_second_run_into_a_directory_in_use_is_refused_and_a_killed_run_frees_it(bar, tmp_path):
     out = tmp_path / "out"
     first = _start([bar, "--out", out, "--set", "time.end=1e3", "--set", "output.checkpoint_every=100"])
     try:
         wait_for(lambda: list((out / "checkpoints").glob("step_*.h5")), poll=0.1)
         before = (out / "scene.json").read_bytes()
-        for extra in ([], ["--overwrite"], ["--restart", "latest"]):
-            proc = parsph(["run", bar, "--out", out, "--quiet", "--set", "time.end=1e3", *extra])
+        # the three attempts one after another in one MPI job of one rank (conftest.parsph_batch)
+        for proc in parsph_batch([["run", bar, "--out", out, "--quiet", "--set", "time.end=1e3", *extra]
+                                  for extra in ([], ["--overwrite"], ["--restart", "latest"])], 1, tmp_path / "batch"):
             refused(proc, "in use by another run", f"pid {first.pid}")
         assert first.poll() is None, "the first run was disturbed"
         assert (out / "scene.json").read_bytes() == before
@@ -166,17 +168,17 @@ def test_restart_with_a_damaged_history_or_snapshot_file_is_refused(bar, tmp_pat
     assert all_series(fresh / "history.h5")["step"][-1] == 60
 
 
+@pytest.mark.mpi
 def test_unusable_output_paths_are_refused(bar, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
-    proc = parsph(["run", bar, "--out", blocker / "sub", "--quiet"])
-    refused(proc, "a_file")
-    proc = parsph(["run", bar, "--out", blocker, "--quiet"])
-    refused(proc, "not a directory")
     link = tmp_path / "dangling"
     link.symlink_to(tmp_path / "nowhere")
-    proc = parsph(["run", bar, "--out", link, "--quiet"])
-    refused(proc, "dangling symbolic link")
+    # the three runs one after another in one MPI job of one rank (conftest.parsph_batch)
+    procs = parsph_batch([["run", bar, "--out", where, "--quiet"] for where in (blocker / "sub", blocker, link)], 1,
+                         tmp_path / "batch")
+    for proc, words in zip(procs, ("a_file", "not a directory", "dangling symbolic link")):
+        refused(proc, words)
     assert blocker.read_text() == "x"
 
 
