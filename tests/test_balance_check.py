@@ -248,9 +248,12 @@ def test_a_flyer_at_ten_times_the_speed_keeps_its_balance(spacing, tolerance):
     """flyer_plate at 1e4 m/s (a closing speed 2.5 times the sound speed): the first step
     moved the flyer's face through the target's (+27.6 % energy at 1e-4 m spacing, +3 % at
     the scene's); with the closing pairs bounding the step it balances (measured 2.6e-3 and
-    2.3e-4)."""
+    2.6e-4). The impact's first steps set the balance: run to 0.2 us (the shock 2.3 mm into
+    the target), not the scene's 2 us, the largest error is the same to 0.4 % (2.637e-3 and
+    2.634e-4 there, 2.646e-3 and 2.634e-4 at 2 us), and without the closing pairs' bound it
+    is 0.37 and 0.034 by 0.03 us."""
     sim = simulation("flyer_plate", ["parameters.speed=1e4", f"parameters.spacing={spacing}"])
-    h = run_until(sim, 2e-6, every=200)
+    h = run_until(sim, 2e-7, every=20)
     assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < tolerance * h["kinetic_energy"][0]
 
 
