@@ -166,6 +166,19 @@ def parsph_batch(commands: list, ranks: int, folder) -> list:
     return results
 
 
+def parsph_by_ranks(commands: list, folder) -> list:
+    """Run the independent `parsph` command lines `commands`, (ranks, argv) each: those on one
+    rank count one after another in one MPI job (parsph_batch, files under `folder`), the
+    rank counts in turn; returns the CompletedProcess of each, in the order given. (A
+    restart goes in a later call than the run that writes its checkpoint.)"""
+    results = [None] * len(commands)
+    for ranks in sorted({ranks for ranks, _ in commands}):
+        mine = [k for k, (n, _) in enumerate(commands) if n == ranks]
+        for k, proc in zip(mine, parsph_batch([commands[k][1] for k in mine], ranks, Path(folder) / f"ranks_{ranks}")):
+            results[k] = proc
+    return results
+
+
 @pytest.fixture
 def run_parsph():
     return parsph
@@ -182,6 +195,23 @@ def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> list:
         assert proc.returncode == 0, proc.stderr
         outs.append(out)
     assert_identical_outputs(*outs)
+    return outs
+
+
+def assert_each_same_on_ranks(cases, folder, ranks=(1, 3)) -> list:
+    """assert_same_on_ranks for each (SCENE, ARGS, OUT_DIR) of `cases`, the cases' runs on one
+    rank count one after another in one MPI job (parsph_by_ranks, files under `folder`);
+    returns each case's output directories."""
+    outs = [[Path(out_dir) / f"ranks_{n}" for n in ranks] for _, _, out_dir in cases]
+    procs = iter(parsph_by_ranks([(n, ["run", scene, "--out", out, "--quiet", *args])
+                                  for (scene, args, _), case_outs in zip(cases, outs)
+                                  for n, out in zip(ranks, case_outs)], folder))
+    for case_outs in outs:
+        for out in case_outs:
+            proc = next(procs)
+            assert proc.returncode == 0, f"{out}: {proc.stderr}"
+    for case_outs in outs:
+        assert_identical_outputs(*case_outs)
     return outs
 
 
@@ -244,7 +274,7 @@ def assert_identical_outputs(*outs) -> None:
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = _compare_outputs().main(list(map(str, outs)))
-    assert code == 0 and "identical" in out.getvalue(), out.getvalue() + err.getvalue()
+    assert code == 0 and "identical" in out.getvalue(), f"{' against '.join(map(str, outs))}:\n" + out.getvalue() + err.getvalue()
 
 
 # ---- MPI jobs with more ranks than cores
