@@ -180,18 +180,23 @@ def test_quarter_with_kept_lists_moves_as_with_a_search_at_every_update(formulat
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("formulation", KEPT)
-def test_quarter_with_kept_lists_is_the_same_on_1_and_3_ranks(tmp_path, formulation):
-    """The same, 80 steps as runs: searching at every update on one rank and keeping the
-    lists for up to 30 updates on three give the same history and final state bit for bit."""
-    from conftest import assert_identical_outputs, parsph
+def test_quarter_with_kept_lists_is_the_same_on_1_and_3_ranks(tmp_path):
+    """The same, 80 steps as runs, for each of KEPT: searching at every update on one rank
+    and keeping the lists for up to 30 updates on three give the same history and final
+    state bit for bit. The formulations' runs on one rank count go one after another in one
+    MPI job (conftest.parsph_by_ranks)."""
+    from conftest import assert_identical_outputs, parsph_by_ranks
 
-    outs = []
-    for every, ranks in ((1, 1), (30, 3)):
-        scene = tmp_path / f"kept_{every}.toml"
-        scene.write_text(pressed_block(True, f"{formulation}\nsearch_every = {every}")
-                         + "[output]\nhistory_every = 20\n")
-        outs.append(tmp_path / f"out_{every}")
-        proc = parsph(["run", scene, "--out", outs[-1], "--quiet", "--set", "time.max_steps=80"], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(*outs)
+    commands, outs = [], []
+    for k, formulation in enumerate(KEPT):
+        outs.append([])
+        for every, ranks in ((1, 1), (30, 3)):
+            scene = tmp_path / f"kept_{k}_{every}.toml"
+            scene.write_text(pressed_block(True, f"{formulation}\nsearch_every = {every}")
+                             + "[output]\nhistory_every = 20\n")
+            outs[-1].append(tmp_path / f"out_{k}_{every}")
+            commands.append((ranks, ["run", scene, "--out", outs[-1][-1], "--quiet", "--set", "time.max_steps=80"]))
+    for (_, argv), proc in zip(commands, parsph_by_ranks(commands, tmp_path / "batch")):
+        assert proc.returncode == 0, f"{argv}: {proc.stderr}"
+    for pair in outs:
+        assert_identical_outputs(*pair)
