@@ -179,6 +179,14 @@ def parsph_by_ranks(commands: list, folder) -> list:
     return results
 
 
+def assert_runs_by_ranks(commands: list, folder) -> list:
+    """parsph_by_ranks, asserting that every command line exits 0; returns the results."""
+    results = parsph_by_ranks(commands, folder)
+    for (ranks, argv), proc in zip(commands, results):
+        assert proc.returncode == 0, f"{' '.join(map(str, argv))} on {ranks} rank(s):\n{proc.stderr}"
+    return results
+
+
 @pytest.fixture
 def run_parsph():
     return parsph
@@ -274,7 +282,8 @@ def assert_identical_outputs(*outs) -> None:
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = _compare_outputs().main(list(map(str, outs)))
-    assert code == 0 and "identical" in out.getvalue(), f"{' against '.join(map(str, outs))}:\n" + out.getvalue() + err.getvalue()
+    assert code == 0 and "identical" in out.getvalue(), \
+        f"{' against '.join(map(str, outs))}:\n{out.getvalue()}{err.getvalue()}"
 
 
 # ---- MPI jobs with more ranks than cores
