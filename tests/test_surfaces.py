@@ -18,7 +18,7 @@ from parsph import preview
 from parsph.io import read_history
 from physics import run_until, simulation, soft_solid
 
-from conftest import ROOT, RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+from conftest import ROOT, RUNS, assert_identical_outputs, assert_runs_by_ranks, assert_same_on_ranks, parsph
 
 sys.path.insert(0, str(ROOT / "tools"))
 import measure  # noqa: E402
@@ -308,10 +308,11 @@ def test_a_run_with_a_surface_restarts_bit_for_bit(tmp_path):
               "--set", "output.history_interval=0.0"]
     straight, split = tmp_path / "straight", tmp_path / "split"
     scene = RUNS / "punch_stl.toml"
-    for out, ranks, extra in ((straight, 1, ["--set", "time.max_steps=40"]),
-                              (split, 1, ["--set", "time.max_steps=20", "--set", "output.checkpoint_every=20"]),
-                              (split, 2, ["--set", "time.max_steps=40", "--restart", "latest"])):
-        proc = parsph(["run", scene, "--out", out, *common, *extra], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
+    # the straight and the stopped run in one job (conftest.parsph_by_ranks), then the restart
+    assert_runs_by_ranks([(1, ["run", scene, "--out", straight, *common, "--set", "time.max_steps=40"]),
+                          (1, ["run", scene, "--out", split, *common, "--set", "time.max_steps=20",
+                               "--set", "output.checkpoint_every=20"])], tmp_path / "batch")
+    assert_runs_by_ranks([(2, ["run", scene, "--out", split, *common, "--set", "time.max_steps=40",
+                               "--restart", "latest"])], tmp_path / "batch_restart")
     assert_identical_outputs(straight, split)
     assert np.abs(read_history(split)["surface0_torque_z"]).max() > 0.0
