@@ -260,7 +260,8 @@ def same_across_ranks_and_restart(scenes) -> None:
         stops.append(steps[at])  # a row: the stopped run writes one there
         assert 0.0 < work[at] < work[-1], f"{one}: the strip must be cracking at the restart and go on after it"
     stopped = [["run", path, "--out", split, "--quiet", *args, "--set", f"time.max_steps={stop}",
-                "--set", f"output.checkpoint_every={stop}"] for (path, _, args), split, stop in zip(scenes, splits, stops)]
+                "--set", f"output.checkpoint_every={stop}"]
+               for (path, _, args), split, stop in zip(scenes, splits, stops)]
     restarted = [["run", path, "--out", split, "--quiet", *args, "--restart", "latest"]
                  for (path, _, args), split in zip(scenes, splits)]
     for commands, ranks in ((stopped, 2), (restarted, 3)):

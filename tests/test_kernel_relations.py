@@ -129,7 +129,8 @@ def test_relations_are_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
         path = tmp_path / f"{name}.toml"
         path.write_text(blocks(bodies))
         one, split = tmp_path / name / "one", tmp_path / name / "split"
-        commands += [(1, ["run", path, "--out", one, "--quiet"]), (2, ["run", path, "--out", split, "--quiet", *stopped])]
+        commands += [(1, ["run", path, "--out", one, "--quiet"]),
+                     (2, ["run", path, "--out", split, "--quiet", *stopped])]
         restarts.append((3, ["run", path, "--out", split, "--quiet", "--restart", "latest"]))
     procs = parsph_by_ranks(commands, tmp_path / "batch")
     procs += parsph_by_ranks(restarts, tmp_path / "batch_restarts")  # after the stopped runs

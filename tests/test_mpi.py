@@ -70,7 +70,8 @@ def test_same_answer_on_every_rank_count(tmp_path):
         scenes = [scene for scene in sorted(CASES) if n in CASES[scene][1]]
         commands = [["run", RUNS / f"{scene}.toml", "--out", tmp_path / scene / f"r{n}", "--quiet", "--debug",
                      "--set", f"output.snapshot_fields={FIELDS}", *CASES[scene][0]] for scene in scenes]
-        procs.update({(scene, n): proc for scene, proc in zip(scenes, parsph_batch(commands, n, tmp_path / f"batch{n}"))})
+        results = parsph_batch(commands, n, tmp_path / f"batch{n}")
+        procs.update({(scene, n): proc for scene, proc in zip(scenes, results)})
     failures = []
     for scene, (_, ranks) in sorted(CASES.items()):
         try:
