@@ -12,7 +12,8 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import CEILING, ROOT, RUNS, kill_processes_mentioning, mpiexec, parsph, parsph_batch, wait_for
+from conftest import (CEILING, ROOT, RUNS, assert_runs_by_ranks, kill_processes_mentioning, mpiexec, parsph,
+                      parsph_batch, wait_for)
 from parsph.io import read_history, read_snapshots
 
 FIELDS = '["position","velocity","J"]'
@@ -75,10 +76,12 @@ def test_updated_reference_restart_continues_bit_for_bit(tmp_path):
     # 50 m/s, faster than the rubber's waves: the ring is crushed at t = 0.3 ms; 40 steps at
     # time.cfl = 0.3 end before
     ring = ["--set", "parameters.spacing=4e-3", "--set", "initial.0.value=[-50.0, 0.0]", "--set", "time.cfl=0.3"]
-    straight = tmp_path / "straight"
-    run(straight, 2, "--set", "time.max_steps=40", *ring, scene="rings")
-    split = tmp_path / "split"
-    run(split, 2, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=20", *ring, scene="rings")
+    straight, split = tmp_path / "straight", tmp_path / "split"
+    rings = ["run", RUNS / "rings.toml", "--quiet", *PATCH, *ring, "--out"]
+    # the straight and the stopped run in one MPI job (conftest.parsph_by_ranks), then the restart
+    assert_runs_by_ranks([(2, [*rings, straight, "--set", "time.max_steps=40"]),
+                          (2, [*rings, split, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=20"])],
+                         tmp_path / "batch")
     run(split, 3, "--set", "time.max_steps=40", "--restart", "latest", *ring, scene="rings")
     _, a = final(straight)
     _, b = final(split)
@@ -90,26 +93,34 @@ def test_updated_reference_restart_continues_bit_for_bit(tmp_path):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("scene", ["taylor_impact", "ring_shear_bands"])
-def test_plastic_state_restart_continues_bit_for_bit(tmp_path, scene):
+def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
     """Taylor bar (J2 plasticity at the particles, wall contact) and steel ring (at KBM's
     stress points too): a checkpoint while they yield (step 40), restarted on another rank
-    count, continues exactly, plastic strain and energies too."""
+    count, continues exactly, plastic strain and energies too. The two scenes' straight and
+    stopped runs go in one MPI job (conftest.parsph_by_ranks), then their restarts in one."""
     names = ("position", "velocity", "J", "plastic_strain", "plastic_work")
     fields = ["--set", "output.snapshot_fields=" + str(list(names)).replace("'", '"')]
-    straight = tmp_path / "straight"
-    run(straight, 2, "--set", "time.max_steps=80", *fields, scene=scene)
-    split = tmp_path / "split"
-    run(split, 2, "--set", "time.max_steps=40", "--set", "output.checkpoint_every=40", *fields, scene=scene)
-    run(split, 3, "--set", "time.max_steps=80", "--restart", "latest", *fields, scene=scene)
-    _, a = final(straight, names)
-    _, b = final(split, names)
-    assert a["plastic_strain"].max() > 0
-    for field in a:
-        assert np.array_equal(a[field], b[field]), field
-    ha, hb = history(straight), history(split)
-    for name in ("plastic_work", "external_work", "total_energy"):
-        assert np.array_equal(ha[name], hb[name]), name
+    scenes = ("taylor_impact", "ring_shear_bands")
+
+    def command(scene, out, *extra):
+        return ["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *extra, *fields]
+
+    assert_runs_by_ranks([(2, command(scene, tmp_path / scene / out, *extra)) for scene in scenes
+                          for out, extra in (("straight", ["--set", "time.max_steps=80"]),
+                                             ("split", ["--set", "time.max_steps=40",
+                                                        "--set", "output.checkpoint_every=40"]))],
+                         tmp_path / "batch")
+    assert_runs_by_ranks([(3, command(scene, tmp_path / scene / "split", "--set", "time.max_steps=80",
+                                      "--restart", "latest")) for scene in scenes], tmp_path / "batch_restart")
+    for scene in scenes:
+        _, a = final(tmp_path / scene / "straight", names)
+        _, b = final(tmp_path / scene / "split", names)
+        assert a["plastic_strain"].max() > 0, scene
+        for field in a:
+            assert np.array_equal(a[field], b[field]), (scene, field)
+        ha, hb = history(tmp_path / scene / "straight"), history(tmp_path / scene / "split")
+        for name in ("plastic_work", "external_work", "total_energy"):
+            assert np.array_equal(ha[name], hb[name]), (scene, name)
 
 
 @pytest.mark.mpi
