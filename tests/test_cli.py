@@ -502,14 +502,21 @@ PLOT_REFUSALS = {  # name: (the arguments after `plot`, given the run's director
 }
 
 
-@pytest.mark.parametrize("ranks", RANKS)
-@pytest.mark.parametrize("name", list(PLOT_REFUSALS))
-def test_plot_refuses_bad_input_and_keeps_the_run(bar_output, name, ranks):
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_plot_refuses_bad_input_and_keeps_the_run(bar_output, ranks, tmp_path):
+    """Each of PLOT_REFUSALS is refused; none wrote a file and the run is whole. The cases
+    run one after another in one MPI job (conftest.parsph_batch)."""
     from parsph.io import read_history, read_snapshots
 
-    args, expect = PLOT_REFUSALS[name]
-    proc = parsph(["plot", *args(bar_output)], ranks=ranks)
-    assert_bad_input(proc, expect)
+    procs = parsph_batch([["plot", *args(bar_output)] for args, _ in PLOT_REFUSALS.values()], ranks, tmp_path)
+    failures = []
+    for (name, (_, expect)), proc in zip(PLOT_REFUSALS.items(), procs):
+        try:
+            assert_bad_input(proc, expect)
+        except AssertionError as exc:
+            failures.append(f"{name}: {exc}")
+    assert not failures, "\n\n".join(failures)
     assert not list(bar_output.rglob("*.png")), "a refused plot wrote a file"
     assert len(read_snapshots(bar_output)) == 3 and len(read_history(bar_output)["time"]) > 1
 
