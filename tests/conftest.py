@@ -146,15 +146,18 @@ def parsph_batch(commands: list, ranks: int, folder) -> list:
     """Run the `parsph` command lines `commands` (argument lists) one after another in one
     MPI job of `ranks` ranks (tests/mpi/cli_batch.py), files under `folder`; returns for
     each a subprocess.CompletedProcess as `parsph` would: the ranks' highest exit code and
-    their standard output and error, concatenated in rank order."""
+    their standard output and error, concatenated in rank order. One rank is one process
+    without a launcher, as `parsph(..., ranks=1)` runs it."""
     import json
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     cases = [{"argv": list(map(str, argv)), "out": str(folder / f"case{k}")} for k, argv in enumerate(commands)]
     (folder / "cases.json").write_text(json.dumps(cases))
-    cmd = [mpiexec(), "-n", str(ranks), sys.executable, str(ROOT / "tests" / "mpi" / "cli_batch.py"),
-           str(folder / "cases.json"), str(folder / "results.json")]
+    cmd = [sys.executable, str(ROOT / "tests" / "mpi" / "cli_batch.py"), str(folder / "cases.json"),
+           str(folder / "results.json")]
+    if ranks > 1:
+        cmd = [mpiexec(), "-n", str(ranks), *cmd]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     job = subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT, env=env)
     assert job.returncode == 0 and (folder / "results.json").exists(), job.stdout + job.stderr

@@ -93,12 +93,11 @@ def test_every_flipped_bit_of_a_checkpoint_is_refused(bar_checkpoints, tmp_path)
     assert refused == 8 * len(spots) + 5
 
 
-@pytest.mark.mpi
 def test_restart_latest_skips_a_damaged_checkpoint_and_continues_bit_for_bit(bar_checkpoints, tmp_path):
     """The issue's cases: each damage to the newest checkpoint is reported, the older one is
     used, and the continued run ends equal to the straight run in every history series.
-    The four refusals run one after another in one MPI job of one rank
-    (conftest.parsph_batch), then the four restarts in another."""
+    The four refusals run one after another in one process (conftest.parsph_batch), then
+    the four restarts in another."""
     import shutil
 
     root, scene, common = bar_checkpoints

@@ -60,8 +60,7 @@ NOT_FINITE = [
 ]
 
 
-@pytest.mark.mpi
-@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
 def test_a_value_that_is_not_finite_ends_the_run_with_exit_2_naming_the_particle(ranks, tmp_path):
     """Each of NOT_FINITE; the runs one after another in one MPI job (conftest.parsph_batch)."""
     commands = []

@@ -94,14 +94,13 @@ def _start(args):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 
-@pytest.mark.mpi
 def test_a_second_run_into_a_directory_in_use_is_refused_and_a_killed_run_frees_it(bar, tmp_path):
     out = tmp_path / "out"
     first = _start([bar, "--out", out, "--set", "time.end=1e3", "--set", "output.checkpoint_every=100"])
     try:
         wait_for(lambda: list((out / "checkpoints").glob("step_*.h5")), poll=0.1)
         before = (out / "scene.json").read_bytes()
-        # the three attempts one after another in one MPI job of one rank (conftest.parsph_batch)
+        # the three attempts one after another in one process (conftest.parsph_batch)
         for proc in parsph_batch([["run", bar, "--out", out, "--quiet", "--set", "time.end=1e3", *extra]
                                   for extra in ([], ["--overwrite"], ["--restart", "latest"])], 1, tmp_path / "batch"):
             refused(proc, "in use by another run", f"pid {first.pid}")
@@ -168,13 +167,12 @@ def test_restart_with_a_damaged_history_or_snapshot_file_is_refused(bar, tmp_pat
     assert all_series(fresh / "history.h5")["step"][-1] == 60
 
 
-@pytest.mark.mpi
 def test_unusable_output_paths_are_refused(bar, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
     link = tmp_path / "dangling"
     link.symlink_to(tmp_path / "nowhere")
-    # the three runs one after another in one MPI job of one rank (conftest.parsph_batch)
+    # the three runs one after another in one process (conftest.parsph_batch)
     procs = parsph_batch([["run", bar, "--out", where, "--quiet"] for where in (blocker / "sub", blocker, link)], 1,
                          tmp_path / "batch")
     for proc, words in zip(procs, ("a_file", "not a directory", "dangling symbolic link")):

@@ -86,8 +86,7 @@ def test_what_is_written_is_what_a_run_starts_from(scene, tmp_path):
     assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(shown["gid"])
 
 
-@pytest.mark.mpi
-@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("ranks", RANKS)
 def test_bad_input_and_an_occupied_output_directory(ranks, tmp_path):
     """Bad input is refused; a directory holding a preview is refused, and kept when the
     scene given with --overwrite is bad; a good one with --overwrite replaces it. The

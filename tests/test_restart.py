@@ -123,11 +123,10 @@ def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
             assert np.array_equal(ha[name], hb[name]), (scene, name)
 
 
-@pytest.mark.mpi
 def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
     out = tmp_path / "run"
     run(out, 1, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10")
-    # the refused restart and the allowed one one after another in one MPI job (conftest.parsph_batch)
+    # the refused restart and the allowed one one after another in one process (conftest.parsph_batch)
     refusal, proc = parsph_batch([
         ["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest",
          "--set", "material.density=2.0", "--set", "formulation.hourglass=10"],
@@ -140,8 +139,7 @@ def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
         assert f["time"][-1] >= 0.4
 
 
-@pytest.mark.mpi
-@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
 def test_restart_refusal_names_the_changed_keys_of_bodies_and_contact(tmp_path, ranks):
     out = tmp_path / "run"
     # the run and the refused restart one after another in one MPI job (conftest.parsph_batch)
@@ -157,8 +155,7 @@ def test_restart_refusal_names_the_changed_keys_of_bodies_and_contact(tmp_path, 
     assert "in bodies.1.material.density, contact.0.stiffness;" in proc.stderr, proc.stderr
 
 
-@pytest.mark.mpi
-@pytest.mark.parametrize("ranks", [1, 3])
+@pytest.mark.parametrize("ranks", [1, pytest.param(3, marks=pytest.mark.mpi)])
 def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp_path, ranks):
     """The ranks hash the file's chunks among them: a changed last velocity (the end of the
     file) and a truncated file are found, and every rank refuses the file."""
