@@ -142,12 +142,12 @@ def parsph(args, ranks: int = 1, timeout: float = CEILING, cwd=None, env=None) -
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
 
 
-def parsph_batch(commands: list, ranks: int, folder) -> list:
+def parsph_batch(commands: list, ranks: int, folder, env=None) -> list:
     """Run the `parsph` command lines `commands` (argument lists) one after another in one
-    MPI job of `ranks` ranks (tests/mpi/cli_batch.py), files under `folder`; returns for
-    each a subprocess.CompletedProcess as `parsph` would: the ranks' highest exit code and
-    their standard output and error, concatenated in rank order. One rank is one process
-    without a launcher, as `parsph(..., ranks=1)` runs it."""
+    MPI job of `ranks` ranks (tests/mpi/cli_batch.py; extra environment `env`), files under
+    `folder`; returns for each a subprocess.CompletedProcess as `parsph` would: the ranks'
+    highest exit code and their standard output and error, concatenated in rank order. One
+    rank is one process without a launcher, as `parsph(..., ranks=1)` runs it."""
     import json
 
     folder = Path(folder)
@@ -158,7 +158,7 @@ def parsph_batch(commands: list, ranks: int, folder) -> list:
            str(folder / "results.json")]
     if ranks > 1:
         cmd = [mpiexec(), "-n", str(ranks), *cmd]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
     job = subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT, env=env)
     assert job.returncode == 0 and (folder / "results.json").exists(), job.stdout + job.stderr
     results = []
