@@ -157,13 +157,16 @@ def test_restart_with_a_damaged_history_or_snapshot_file_is_refused(bar, tmp_pat
     data[: len(data) // 2] = bytes(len(data) // 2)  # the superblock and root group zeroed
     path.write_bytes(bytes(data))
     before = files_of(out)
-    proc = parsph(["run", bar, "--out", out, "--quiet", "--restart", "latest", "--set", "time.max_steps=60"])
+    fresh = tmp_path / "fresh"
+    # the refused restart and the advised one (from the checkpoint into a fresh directory) one
+    # after another in one process (conftest.parsph_batch)
+    proc, advised = parsph_batch([
+        ["run", bar, "--out", out, "--quiet", "--restart", "latest", "--set", "time.max_steps=60"],
+        ["run", bar, "--out", fresh, "--restart", out / "checkpoints" / "step_00000040.h5",
+         "--set", "time.max_steps=60", "--quiet"]], 1, tmp_path / "batch")
     refused(proc, damaged, "--restart CHECKPOINT_FILE")
     assert files_of(out) == before
-    # the advice works: continue from the checkpoint into a fresh directory
-    fresh = tmp_path / "fresh"
-    run_ok([bar, "--out", fresh, "--restart", out / "checkpoints" / "step_00000040.h5",
-            "--set", "time.max_steps=60"])
+    assert advised.returncode == 0, advised.stderr  # the advice works
     assert all_series(fresh / "history.h5")["step"][-1] == 60
 
 
@@ -226,15 +229,19 @@ def test_restarted_and_stopped_runs_write_the_same_files_as_a_straight_run(bar, 
     """History rows, snapshots and the XDMF index of a run continued from a checkpoint, and
     of a run stopped by the wall-clock limit and continued, equal those of a straight run."""
     common = [*HISTORY, "--set", "output.snapshot_interval=2e-4", "--set", "time.end=2e-3"]
-    straight = tmp_path / "straight"
-    run_ok([bar, "--out", straight, *common])
-    split = tmp_path / "split"
-    run_ok([bar, "--out", split, *common, "--set", "time.max_steps=37", "--set", "output.checkpoint_every=10"])
+    straight, split, stopped = tmp_path / "straight", tmp_path / "split", tmp_path / "stopped"
+    # the three first runs one after another in one process (conftest.parsph_batch)
+    procs = parsph_batch([["run", bar, "--out", straight, *common, "--quiet"],
+                          ["run", bar, "--out", split, *common, "--set", "time.max_steps=37",
+                           "--set", "output.checkpoint_every=10", "--quiet"],
+                          ["run", bar, "--out", stopped, *common, "--set", "time.wall_limit=1e-9", "--quiet"]],
+                         1, tmp_path / "batch")
+    for proc in procs:
+        assert proc.returncode == 0, proc.stderr
     run_ok([bar, "--out", split, *common, "--restart", "latest"])
     assert_same_run(straight, split)
 
-    stopped = tmp_path / "stopped"
-    proc = run_ok([bar, "--out", stopped, *common, "--set", "time.wall_limit=1e-9"])
+    proc = procs[-1]
     assert "stopped by the wall-clock limit" in proc.stdout
     words = shlex.split(proc.stdout.split("continue with: ")[1].splitlines()[0])
     assert words[:2] == ["parsph", "run"] and "time.wall_limit=1e-9" in words  # the --set options kept
