@@ -142,20 +142,23 @@ def parsph(args, ranks: int = 1, timeout: float = CEILING, cwd=None, env=None) -
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=cwd or ROOT, env=env)
 
 
-def parsph_batch(commands: list, ranks: int, folder) -> list:
+def parsph_batch(commands: list, ranks: int, folder, env=None) -> list:
     """Run the `parsph` command lines `commands` (argument lists) one after another in one
-    MPI job of `ranks` ranks (tests/mpi/cli_batch.py), files under `folder`; returns for
-    each a subprocess.CompletedProcess as `parsph` would: the ranks' highest exit code and
-    their standard output and error, concatenated in rank order."""
+    MPI job of `ranks` ranks (tests/mpi/cli_batch.py; extra environment `env`), files under
+    `folder`; returns for each a subprocess.CompletedProcess as `parsph` would: the ranks'
+    highest exit code and their standard output and error, concatenated in rank order. One
+    rank is one process without a launcher, as `parsph(..., ranks=1)` runs it."""
     import json
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     cases = [{"argv": list(map(str, argv)), "out": str(folder / f"case{k}")} for k, argv in enumerate(commands)]
     (folder / "cases.json").write_text(json.dumps(cases))
-    cmd = [mpiexec(), "-n", str(ranks), sys.executable, str(ROOT / "tests" / "mpi" / "cli_batch.py"),
-           str(folder / "cases.json"), str(folder / "results.json")]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, str(ROOT / "tests" / "mpi" / "cli_batch.py"), str(folder / "cases.json"),
+           str(folder / "results.json")]
+    if ranks > 1:
+        cmd = [mpiexec(), "-n", str(ranks), *cmd]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
     job = subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT, env=env)
     assert job.returncode == 0 and (folder / "results.json").exists(), job.stdout + job.stderr
     results = []
@@ -163,6 +166,27 @@ def parsph_batch(commands: list, ranks: int, folder) -> list:
         out, err = ("".join(Path(f"{case['out']}.{r}.{kind}").read_text() for r in range(ranks))
                     for kind in ("stdout", "stderr"))
         results.append(subprocess.CompletedProcess(case["argv"], max(codes), out, err))
+    return results
+
+
+def parsph_by_ranks(commands: list, folder) -> list:
+    """Run the independent `parsph` command lines `commands`, (ranks, argv) each: those on one
+    rank count one after another in one MPI job (parsph_batch, files under `folder`), the
+    rank counts in turn; returns the CompletedProcess of each, in the order given. (A
+    restart goes in a later call than the run that writes its checkpoint.)"""
+    results = [None] * len(commands)
+    for ranks in sorted({ranks for ranks, _ in commands}):
+        mine = [k for k, (n, _) in enumerate(commands) if n == ranks]
+        for k, proc in zip(mine, parsph_batch([commands[k][1] for k in mine], ranks, Path(folder) / f"ranks_{ranks}")):
+            results[k] = proc
+    return results
+
+
+def assert_runs_by_ranks(commands: list, folder) -> list:
+    """parsph_by_ranks, asserting that every command line exits 0; returns the results."""
+    results = parsph_by_ranks(commands, folder)
+    for (ranks, argv), proc in zip(commands, results):
+        assert proc.returncode == 0, f"{' '.join(map(str, argv))} on {ranks} rank(s):\n{proc.stderr}"
     return results
 
 
@@ -182,6 +206,23 @@ def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> list:
         assert proc.returncode == 0, proc.stderr
         outs.append(out)
     assert_identical_outputs(*outs)
+    return outs
+
+
+def assert_each_same_on_ranks(cases, folder, ranks=(1, 3)) -> list:
+    """assert_same_on_ranks for each (SCENE, ARGS, OUT_DIR) of `cases`, the cases' runs on one
+    rank count one after another in one MPI job (parsph_by_ranks, files under `folder`);
+    returns each case's output directories."""
+    outs = [[Path(out_dir) / f"ranks_{n}" for n in ranks] for _, _, out_dir in cases]
+    procs = iter(parsph_by_ranks([(n, ["run", scene, "--out", out, "--quiet", *args])
+                                  for (scene, args, _), case_outs in zip(cases, outs)
+                                  for n, out in zip(ranks, case_outs)], folder))
+    for case_outs in outs:
+        for out in case_outs:
+            proc = next(procs)
+            assert proc.returncode == 0, f"{out}: {proc.stderr}"
+    for case_outs in outs:
+        assert_identical_outputs(*case_outs)
     return outs
 
 
@@ -219,12 +260,33 @@ def assert_it_happened(out, ranks: int = 1) -> None:
             assert owners == set(range(ranks)), f"{out}: particles only on ranks {sorted(owners)}"
 
 
+def _compare_outputs():
+    """tools/compare_outputs.py as a module (loaded once per test process)."""
+    import importlib.util
+
+    module = sys.modules.get("parsph_tools_compare_outputs")
+    if module is None:
+        spec = importlib.util.spec_from_file_location("parsph_tools_compare_outputs",
+                                                      ROOT / "tools" / "compare_outputs.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        sys.modules[spec.name] = module
+    return module
+
+
 def assert_identical_outputs(*outs) -> None:
     """tools/compare_outputs.py finds every history series and the final state of the runs
-    in `outs` identical."""
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_outputs.py"), *map(str, outs)],
-                          capture_output=True, text=True, timeout=CEILING, cwd=ROOT)
-    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+    in `outs` identical. Its main is called in this process (what `python
+    tools/compare_outputs.py OUTS` prints and returns, without starting Python and importing
+    h5py for each comparison)."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = _compare_outputs().main(list(map(str, outs)))
+    assert code == 0 and "identical" in out.getvalue(), \
+        f"{' against '.join(map(str, outs))}:\n{out.getvalue()}{err.getvalue()}"
 
 
 # ---- MPI jobs with more ranks than cores

@@ -16,7 +16,7 @@ from parsph.contact import _repulsion
 from parsph.errors import InputError
 from physics import run_until, scene_from, simulation
 
-from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+from conftest import RUNS, assert_identical_outputs, assert_runs_by_ranks, assert_same_on_ranks
 
 WAVE_SPEED = math.sqrt(200.0e9 / 7850.0)  # the bars' (nu = 0)
 
@@ -344,17 +344,21 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     boundary with 3 ranks): the same history and final state bit for bit on 1 and 3 ranks,
     and a run checkpointed mid-contact on 2 ranks, restarted on 3, continues exactly."""
     coarse = ["--set", "parameters.spacing=2e-3", "--set", "time.end=4e-5"]
-    assert_same_on_ranks(RUNS / "bars_impact.toml", coarse, tmp_path / "bars")
-    split = tmp_path / "split"
-    proc = parsph(["run", RUNS / "bars_impact.toml", "--out", split, "--quiet", *coarse, "--set",
-                   "time.max_steps=150", "--set", "output.checkpoint_every=150"], ranks=2)
-    assert proc.returncode == 0, proc.stderr
-    proc = parsph(["run", RUNS / "bars_impact.toml", "--out", split, "--quiet", *coarse, "--restart", "latest"],
-                  ranks=3)
-    assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(tmp_path / "bars" / "ranks_1", split)
     rings = ["--set", "parameters.spacing=5e-3", "--set", "time.max_steps=120"]  # touching from step ~45
-    assert_same_on_ranks(RUNS / "rings_contact.toml", rings, tmp_path / "rings")
+    bars, split = RUNS / "bars_impact.toml", tmp_path / "split"
+    straight = [(bars, coarse, tmp_path / "bars"), (RUNS / "rings_contact.toml", rings, tmp_path / "rings")]
+    # three MPI jobs (conftest.parsph_by_ranks): one rank; two ranks; three ranks straight and restarted
+    assert_runs_by_ranks([(1, ["run", scene, "--out", out / "ranks_1", "--quiet", *args])
+                          for scene, args, out in straight]
+                         + [(2, ["run", bars, "--out", split, "--quiet", *coarse, "--set", "time.max_steps=150",
+                                 "--set", "output.checkpoint_every=150"])], tmp_path / "batch")
+    assert_runs_by_ranks([(3, ["run", scene, "--out", out / "ranks_3", "--quiet", *args])
+                          for scene, args, out in straight]
+                         + [(3, ["run", bars, "--out", split, "--quiet", *coarse, "--restart", "latest"])],
+                         tmp_path / "batch_restart")
+    for _, _, out in straight:
+        assert_identical_outputs(out / "ranks_1", out / "ranks_3")
+    assert_identical_outputs(tmp_path / "bars" / "ranks_1", split)
 
 
 @pytest.mark.mpi

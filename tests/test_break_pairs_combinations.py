@@ -181,9 +181,9 @@ def test_updated_eulerian_and_mirrored_breaking_is_the_same_on_three_ranks_and_a
     """The updated plate impact, the Eulerian strip and the half strip: one rank against two
     to about 3/4 of the run and three after a restart (the cut pairs from the checkpoint):
     bit for bit."""
-    same_across_ranks_and_restart(RUNS / "plate_impact.toml", tmp_path / "plate", [
-        arg for key in PLATE for arg in ("--set", key)])
+    scenes = [(RUNS / "plate_impact.toml", tmp_path / "plate", [arg for key in PLATE for arg in ("--set", key)])]
     for name, text in (("eulerian", EULERIAN_STRIP), ("half", HALF_STRIP)):
         path = tmp_path / f"{name}.toml"
         path.write_text(text)
-        same_across_ranks_and_restart(path, tmp_path / name)
+        scenes.append((path, tmp_path / name, ()))
+    same_across_ranks_and_restart(scenes)

@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import BAR, parsph
+from conftest import BAR, parsph, parsph_batch
 
 
 @pytest.fixture(scope="module")
@@ -93,39 +93,47 @@ def test_every_flipped_bit_of_a_checkpoint_is_refused(bar_checkpoints, tmp_path)
     assert refused == 8 * len(spots) + 5
 
 
-@pytest.mark.parametrize("what", ["sign of a velocity", "sign of a mass", "clock time", "HDF5 object header"])
-def test_restart_latest_skips_a_damaged_checkpoint_and_continues_bit_for_bit(bar_checkpoints, tmp_path, what):
+def test_restart_latest_skips_a_damaged_checkpoint_and_continues_bit_for_bit(bar_checkpoints, tmp_path):
     """The issue's cases: each damage to the newest checkpoint is reported, the older one is
-    used, and the continued run ends equal to the straight run in every history series."""
-    root, scene, common = bar_checkpoints
-    out = tmp_path / "split"
+    used, and the continued run ends equal to the straight run in every history series.
+    The four refusals run one after another in one process (conftest.parsph_batch), then
+    the four restarts in another."""
     import shutil
 
-    shutil.copytree(root / "split", out)
-    newest = out / "checkpoints" / "step_00000060.h5"
-    with h5py.File(newest, "r") as f:
-        offsets = {"sign of a velocity": f["v"].id.get_offset() + 8 * 7 + 7,
-                   "sign of a mass": f["mass"].id.get_offset() + 8 * 3 + 7,
-                   "HDF5 object header": f["u"].id.get_offset() - 40}
-    data = bytearray(newest.read_bytes())
-    offsets["clock time"] = data.find(b'"t": ') + 7
-    data[offsets[what]] ^= 0x80 if what.startswith("sign") else 0x04
-    newest.write_bytes(bytes(data))
-    before = (out / "history.h5").read_bytes()
+    root, scene, common = bar_checkpoints
+    cases = ["sign of a velocity", "sign of a mass", "clock time", "HDF5 object header"]
+    outs, newest, before = {}, {}, {}
+    for k, what in enumerate(cases):
+        out = outs[what] = tmp_path / f"split{k}"
+        shutil.copytree(root / "split", out)
+        newest[what] = out / "checkpoints" / "step_00000060.h5"
+        with h5py.File(newest[what], "r") as f:
+            offsets = {"sign of a velocity": f["v"].id.get_offset() + 8 * 7 + 7,
+                       "sign of a mass": f["mass"].id.get_offset() + 8 * 3 + 7,
+                       "HDF5 object header": f["u"].id.get_offset() - 40}
+        data = bytearray(newest[what].read_bytes())
+        offsets["clock time"] = data.find(b'"t": ') + 7
+        data[offsets[what]] ^= 0x80 if what.startswith("sign") else 0x04
+        newest[what].write_bytes(bytes(data))
+        before[what] = (out / "history.h5").read_bytes()
 
-    proc = parsph(["run", scene, "--out", out, "--restart", newest, *common, "--set", "time.max_steps=80"])
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-    assert "step_00000060.h5 is damaged" in proc.stderr, proc.stderr
-    assert (out / "history.h5").read_bytes() == before  # refused before anything was changed
+    refusals = parsph_batch([["run", scene, "--out", outs[what], "--restart", newest[what], *common,
+                              "--set", "time.max_steps=80"] for what in cases], 1, tmp_path / "refusals")
+    for what, proc in zip(cases, refusals):
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, f"{what}: {proc.stderr}"
+        assert "step_00000060.h5 is damaged" in proc.stderr, f"{what}: {proc.stderr}"
+        assert (outs[what] / "history.h5").read_bytes() == before[what], what  # refused before anything changed
 
-    proc = parsph(["run", scene, "--out", out, "--restart", "latest", *common, "--set", "time.max_steps=80"])
-    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
-    assert "skipping checkpoint" in proc.stdout and "is damaged" in proc.stdout, proc.stdout
-    assert "restarting from" in proc.stdout and "step_00000040.h5" in proc.stdout, proc.stdout
-    with h5py.File(root / "straight" / "history.h5", "r") as a, h5py.File(out / "history.h5", "r") as b:
-        assert sorted(a) == sorted(b)
-        for name in a:
-            assert np.array_equal(a[name][()], b[name][()]), name
+    restarts = parsph_batch([["run", scene, "--out", outs[what], "--restart", "latest", *common,
+                              "--set", "time.max_steps=80"] for what in cases], 1, tmp_path / "restarts")
+    for what, proc in zip(cases, restarts):
+        assert proc.returncode == 0 and "Traceback" not in proc.stderr, f"{what}: {proc.stderr}"
+        assert "skipping checkpoint" in proc.stdout and "is damaged" in proc.stdout, f"{what}: {proc.stdout}"
+        assert "restarting from" in proc.stdout and "step_00000040.h5" in proc.stdout, f"{what}: {proc.stdout}"
+        with h5py.File(root / "straight" / "history.h5", "r") as a, h5py.File(outs[what] / "history.h5", "r") as b:
+            assert sorted(a) == sorted(b), what
+            for name in a:
+                assert np.array_equal(a[name][()], b[name][()]), (what, name)
 
 
 def test_a_checkpoint_of_an_older_format_is_refused_with_a_message(bar_checkpoints, tmp_path):

@@ -348,25 +348,29 @@ def assert_bad_input(proc, expect: list[str]) -> None:
     assert err.count(expect[0]) == 1, err
 
 
-def bad_input_params():
+def test_bad_input_exit_2_with_one_clear_message(tmp_path):
     """Each case on one rank: scene errors (found by config.load, the same code for `check`
-    and `run`) as `check`, errors only `run` finds as `run`. The cases under two ranks are
-    one test (test_bad_input_under_two_ranks_exit_2_with_one_clear_message)."""
+    and `run`) as `check`, errors only `run` finds as `run`: exit code 2, one message,
+    nothing printed to stdout, nothing run. The cases run one after another in one process
+    (conftest.parsph_batch): a process per case would spend most of its time starting. The
+    cases under two ranks are test_bad_input_under_two_ranks_exit_2_with_one_clear_message."""
+    commands, outs = [], []
     for name, case in BAD_INPUT.items():
-        command = "run" if case.build else "check"
-        yield pytest.param(name, command, id=f"{name}-{command}-1rank")
-
-
-@pytest.mark.parametrize(("name", "command"), list(bad_input_params()))
-def test_bad_input_exit_2_with_one_clear_message(name, command, tmp_path):
-    case = BAD_INPUT[name]
-    path = case.make(tmp_path)
-    out = tmp_path / "out"
-    args = ["run", path, "--out", out, *QUICK] if command == "run" else ["check", path]
-    proc = parsph([*args, *case.args])
-    assert_bad_input(proc, case.expect)
-    assert proc.stdout == ""
-    assert not (out / "history.h5").exists()  # nothing was run
+        folder = tmp_path / name
+        folder.mkdir()
+        outs.append(folder / "out")
+        path = case.make(folder)
+        args = ["run", path, "--out", outs[-1], *QUICK] if case.build else ["check", path]
+        commands.append([*args, *case.args])
+    failures = []
+    for name, out, proc in zip(BAD_INPUT, outs, parsph_batch(commands, 1, tmp_path / "batch")):
+        try:
+            assert_bad_input(proc, BAD_INPUT[name].expect)
+            assert proc.stdout == "", proc.stdout
+            assert not (out / "history.h5").exists()  # nothing was run
+        except AssertionError as exc:
+            failures.append(f"{name}: {exc}")
+    assert len(BAD_INPUT) > 40 and not failures, "\n\n".join(failures)
 
 
 @pytest.mark.mpi
@@ -503,13 +507,19 @@ PLOT_REFUSALS = {  # name: (the arguments after `plot`, given the run's director
 
 
 @pytest.mark.parametrize("ranks", RANKS)
-@pytest.mark.parametrize("name", list(PLOT_REFUSALS))
-def test_plot_refuses_bad_input_and_keeps_the_run(bar_output, name, ranks):
+def test_plot_refuses_bad_input_and_keeps_the_run(bar_output, ranks, tmp_path):
+    """Each of PLOT_REFUSALS is refused; none wrote a file and the run is whole. The cases
+    run one after another in one MPI job (conftest.parsph_batch)."""
     from parsph.io import read_history, read_snapshots
 
-    args, expect = PLOT_REFUSALS[name]
-    proc = parsph(["plot", *args(bar_output)], ranks=ranks)
-    assert_bad_input(proc, expect)
+    procs = parsph_batch([["plot", *args(bar_output)] for args, _ in PLOT_REFUSALS.values()], ranks, tmp_path)
+    failures = []
+    for (name, (_, expect)), proc in zip(PLOT_REFUSALS.items(), procs):
+        try:
+            assert_bad_input(proc, expect)
+        except AssertionError as exc:
+            failures.append(f"{name}: {exc}")
+    assert not failures, "\n\n".join(failures)
     assert not list(bar_output.rglob("*.png")), "a refused plot wrote a file"
     assert len(read_snapshots(bar_output)) == 3 and len(read_history(bar_output)["time"]) > 1
 

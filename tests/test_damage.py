@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import assert_identical_outputs, assert_it_happened, parsph
+from conftest import assert_identical_outputs, assert_it_happened, parsph, parsph_batch
 from parsph.diagnostics import global_diagnostics
 from parsph.materials import damage
 from physics import simulation
@@ -237,29 +237,41 @@ def test_damage_is_the_same_on_three_ranks_and_across_a_restart(tmp_path):
     path.write_text(STRIP)
     broken = tmp_path / "broken.toml"
     broken.write_text(STRIP.replace("failure_strain = 0.03", "failure_strain = 0.03\nbreak_pairs = true"))
-    for scene in (path, broken):
-        same_across_ranks_and_restart(scene, tmp_path / scene.stem)
+    same_across_ranks_and_restart([(scene, tmp_path / scene.stem, ()) for scene in (path, broken)])
 
 
-def same_across_ranks_and_restart(path, tmp_path, args=()):
-    """`parsph run PATH ARGS` on one rank straight through against two ranks to a history
-    row at about 3/4 of the run and three after a restart from there: the same bit for bit."""
-    one, split = tmp_path / "one", tmp_path / "split"
-    proc = parsph(["run", path, "--out", one, "--quiet", *args])
-    assert proc.returncode == 0, proc.stderr
-    with h5py.File(one / "history.h5", "r") as f:
-        steps, work = f["step"][()].astype(int), f["damage_work"][()]
-    at = np.argmin(np.abs(steps - 0.75 * steps[-1]))
-    stop = steps[at]  # a row: the stopped run writes one there
-    assert 0.0 < work[at] < work[-1], "the strip must be cracking at the restart and go on after it"
-    stopped = ["--set", f"time.max_steps={stop}", "--set", f"output.checkpoint_every={stop}"]
-    for out, ranks, extra in ((split, 2, stopped), (split, 3, ["--restart", "latest"])):
-        proc = parsph(["run", path, "--out", out, "--quiet", *args, *extra], ranks=ranks)
+def same_across_ranks_and_restart(scenes) -> None:
+    """For each (PATH, FOLDER, ARGS) of `scenes`: `parsph run PATH ARGS` on one rank straight
+    through against two ranks to a history row at about 3/4 of the run and three after a
+    restart from there: the same bit for bit. The scenes' runs on each rank count go one
+    after another in one MPI job (conftest.parsph_batch): three jobs in all, whose starts
+    would otherwise take most of the time."""
+    ones = [folder / "one" for _, folder, _ in scenes]
+    splits = [folder / "split" for _, folder, _ in scenes]
+    batch = scenes[0][1].parent / f"batch_{scenes[0][1].name}"
+    for proc in parsph_batch([["run", path, "--out", one, "--quiet", *args]
+                              for (path, _, args), one in zip(scenes, ones)], 1, batch / "one"):
         assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(one, split)
-    assert_it_happened(one)
-    with h5py.File(one / "snapshots.h5", "r") as f:
-        assert f[max((k for k in f if k.startswith("step_")), key=lambda k: int(k[5:]))]["damage"][()].max() == 1.0
+    stops = []
+    for one in ones:
+        with h5py.File(one / "history.h5", "r") as f:
+            steps, work = f["step"][()].astype(int), f["damage_work"][()]
+        at = np.argmin(np.abs(steps - 0.75 * steps[-1]))
+        stops.append(steps[at])  # a row: the stopped run writes one there
+        assert 0.0 < work[at] < work[-1], f"{one}: the strip must be cracking at the restart and go on after it"
+    stopped = [["run", path, "--out", split, "--quiet", *args, "--set", f"time.max_steps={stop}",
+                "--set", f"output.checkpoint_every={stop}"]
+               for (path, _, args), split, stop in zip(scenes, splits, stops)]
+    restarted = [["run", path, "--out", split, "--quiet", *args, "--restart", "latest"]
+                 for (path, _, args), split in zip(scenes, splits)]
+    for commands, ranks in ((stopped, 2), (restarted, 3)):
+        for proc in parsph_batch(commands, ranks, batch / str(ranks)):
+            assert proc.returncode == 0, proc.stderr
+    for one, split in zip(ones, splits):
+        assert_identical_outputs(one, split)
+        assert_it_happened(one)
+        with h5py.File(one / "snapshots.h5", "r") as f:
+            assert f[max((k for k in f if k.startswith("step_")), key=lambda k: int(k[5:]))]["damage"][()].max() == 1.0
 
 
 @pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])

@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from conftest import parsph
+from conftest import parsph_batch
 from parsph.errors import InputError
 from physics import block_2d, scene_from, simulation
 
@@ -53,17 +53,22 @@ def test_anything_but_arithmetic_of_position_and_parameters_is_refused(expressio
         scene_from(scene_text(expression))
 
 
-@pytest.mark.parametrize("expression, message", [
+NOT_FINITE = [
     ('["log(x - 0.5)", "0"]', r"initial\[0\].expression\[0\] = 'log\(x - 0.5\)' is nan at particle 0"),
     ('["10.0**400 * x", "0"]', "is inf at particle 0"),
     ('["1/(x - x)", "0"]', "is inf at particle 0"),
-])
-@pytest.mark.parametrize("ranks", [1, 2])
-def test_a_value_that_is_not_finite_ends_the_run_with_exit_2_naming_the_particle(expression, message, ranks,
-                                                                                    tmp_path):
-    path = tmp_path / "block.toml"
-    path.write_text(scene_text(expression))
-    proc = parsph(["run", path, "--out", tmp_path / "out", "--quiet"], ranks=ranks)
-    assert proc.returncode == 2, proc.stderr
-    assert "Traceback" not in proc.stderr
-    assert re.search(message, proc.stderr), proc.stderr
+]
+
+
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
+def test_a_value_that_is_not_finite_ends_the_run_with_exit_2_naming_the_particle(ranks, tmp_path):
+    """Each of NOT_FINITE; the runs one after another in one MPI job (conftest.parsph_batch)."""
+    commands = []
+    for k, (expression, _) in enumerate(NOT_FINITE):
+        path = tmp_path / f"block{k}.toml"
+        path.write_text(scene_text(expression))
+        commands.append(["run", path, "--out", tmp_path / f"out{k}", "--quiet"])
+    for (expression, message), proc in zip(NOT_FINITE, parsph_batch(commands, ranks, tmp_path / "batch")):
+        assert proc.returncode == 2, f"{expression}: {proc.stderr}"
+        assert "Traceback" not in proc.stderr
+        assert re.search(message, proc.stderr), proc.stderr

@@ -11,15 +11,12 @@ Measured numbers: docs/notes/2026-12-01-galerkin-methods.md.
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
 
 import h5py
 import numpy as np
 import pytest
 
-from conftest import CEILING, ROOT, assert_identical_outputs, mpiexec
+from conftest import assert_identical_outputs, parsph_by_ranks
 from parsph.analytic import bar_tip_displacement
 from parsph.errors import InputError
 from parsph.geometry.gauss_points import BoxGaussPoints
@@ -246,43 +243,41 @@ def test_stress_and_gauss_points_need_one_box_nodal_efg_takes_any_set_and_symmet
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("method, points, count", [("kbm", "stress_points", 23 * 7),
-                                                   ("kbm_eulerian", "stress_points", 23 * 7),
-                                                   ("efg_cells", "gauss_points", 48 * 16)])
-def test_integration_points_across_ranks_and_restarts_bit_for_bit(tmp_path, method, points, count):
+def test_integration_points_across_ranks_and_restarts_bit_for_bit(tmp_path):
     """A 24 x 8 plate (192 particles; 161 stress points, or 768 Gauss points) clamped at the
-    left, its right quarter thrown, 50 steps: the same history and final state on 1 and 3
-    ranks; stopped at step 20 on 2 ranks and continued from the checkpoint (which holds the
-    integration points' rows) on 3, the same again. With KBM's Eulerian kernel the stress
-    points move with the body and are repartitioned with the particles at every step."""
-    scene = tmp_path / "plate.toml"
-    form = {"kbm": '"kbm"', "kbm_eulerian": '"kbm"\nkernel = "eulerian"',
-            "efg_cells": '"efg"\nintegration = "cells"'}[method]
-    scene.write_text(PLATE.replace('type = "sph"', f"type = {form}"))
-    launcher = os.environ.get("PARSPH_MPIEXEC") or mpiexec()
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-
-    def run(out, ranks, *extra):
-        cmd = [sys.executable, "-m", "parsph", "run", str(scene), "--out", str(out), "--quiet", "--debug", *extra]
-        if ranks > 1:
-            cmd = [launcher, "-n", str(ranks), *cmd]
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=CEILING, cwd=ROOT, env=env)
-        assert proc.returncode == 0, proc.stderr
-
-    one, three, split = tmp_path / "one", tmp_path / "three", tmp_path / "split"
-    run(one, 1)
-    run(three, 3)
-    run(split, 2, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=20")
-    [checkpoint] = (split / "checkpoints").glob("step_*.h5")
-    with h5py.File(checkpoint) as f:
-        assert len(f[f"{points}/X"]) == count and len(f[f"{points}/volume"]) == count
-        along_x = {"kbm": 23, "kbm_eulerian": 23, "efg_cells": 48}[method]
-        assert np.all(np.diff(f[f"{points}/X"][:, 0].reshape(-1, along_x), axis=1) > 0)  # in gid order
-        if method == "kbm_eulerian":  # moved from X with the body
-            assert not np.array_equal(f[f"{points}/Xr"][:], f[f"{points}/X"][:])
-    run(split, 3, "--restart", "latest")
-    for other in (three, split):
-        assert_identical_outputs(one, other)
+    left, its right quarter thrown, 50 steps, with KBM, KBM with the Eulerian kernel and EFG
+    with Gauss points: the same history and final state on 1 and 3 ranks; stopped at step
+    20 on 2 ranks and continued from the checkpoint (which holds the integration points'
+    rows) on 3, the same again. With KBM's Eulerian kernel the stress points move with the
+    body and are repartitioned with the particles at every step. The methods' runs on one
+    rank count go one after another in one MPI job (conftest.parsph_by_ranks): the straight
+    and the stopped runs, then the restarts."""
+    cases = {"kbm": ('"kbm"', "stress_points", 23 * 7, 23),
+             "kbm_eulerian": ('"kbm"\nkernel = "eulerian"', "stress_points", 23 * 7, 23),
+             "efg_cells": ('"efg"\nintegration = "cells"', "gauss_points", 48 * 16, 48)}
+    commands, restarts = [], []
+    for method, (form, _, _, _) in cases.items():
+        scene = tmp_path / f"{method}.toml"
+        scene.write_text(PLATE.replace('type = "sph"', f"type = {form}"))
+        run = ["run", scene, "--quiet", "--debug", "--out"]
+        one, three, split = (tmp_path / method / name for name in ("one", "three", "split"))
+        commands += [(1, [*run, one]), (3, [*run, three]),
+                     (2, [*run, split, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=20"])]
+        restarts.append((3, [*run, split, "--restart", "latest"]))
+    for (_, argv), proc in zip(commands, parsph_by_ranks(commands, tmp_path / "batch")):
+        assert proc.returncode == 0, f"{argv}: {proc.stderr}"
+    for method, (_, points, count, along_x) in cases.items():
+        [checkpoint] = (tmp_path / method / "split" / "checkpoints").glob("step_*.h5")
+        with h5py.File(checkpoint) as f:
+            assert len(f[f"{points}/X"]) == count and len(f[f"{points}/volume"]) == count, method
+            assert np.all(np.diff(f[f"{points}/X"][:, 0].reshape(-1, along_x), axis=1) > 0), method  # in gid order
+            if method == "kbm_eulerian":  # moved from X with the body
+                assert not np.array_equal(f[f"{points}/Xr"][:], f[f"{points}/X"][:])
+    for (_, argv), proc in zip(restarts, parsph_by_ranks(restarts, tmp_path / "batch_restarts")):
+        assert proc.returncode == 0, f"{argv}: {proc.stderr}"
+    for method in cases:
+        for other in ("three", "split"):
+            assert_identical_outputs(tmp_path / method / "one", tmp_path / method / other)
 
 
 # runs/rod.toml at 0.5 mm (120 x 10 particles): [R eq. 75] error at its two snapshots (measured)

@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import assert_identical_outputs, parsph
+from conftest import assert_identical_outputs, parsph, parsph_by_ranks
 from parsph.errors import InputError
 from physics import scene_from, simulation
 
@@ -116,23 +116,31 @@ def test_bodies_with_their_own_hessian_stabilisation_each_move_as_alone():
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("bodies", [UPDATED, BY_STRAIN, KERNELS, HESSIAN],
-                         ids=["schedules", "strain", "kernels", "hessian"])
-def test_relations_are_the_same_on_1_and_3_ranks_and_across_a_restart(bodies, tmp_path):
-    """One rank straight through against two ranks to step 40 (between the updates of one
-    relation, just after the other's) and three after the restart: the same bit for bit."""
-    path = tmp_path / "blocks.toml"
-    path.write_text(blocks(bodies))
-    one, split = tmp_path / "one", tmp_path / "split"
-    proc = parsph(["run", path, "--out", one, "--quiet"])
-    assert proc.returncode == 0, proc.stderr
+def test_relations_are_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
+    """For each of the schedules, strain, kernels and hessian scenes: one rank straight
+    through against two ranks to step 40 (between the updates of one relation, just after
+    the other's) and three after the restart: the same bit for bit. The scenes' runs on one
+    rank count go one after another in one MPI job (conftest.parsph_by_ranks): the straight
+    and the stopped runs, then the restarts."""
+    cases = {"schedules": UPDATED, "strain": BY_STRAIN, "kernels": KERNELS, "hessian": HESSIAN}
     stopped = ["--set", "time.max_steps=40", "--set", "output.checkpoint_every=40"]
-    for ranks, extra in ((2, stopped), (3, ["--restart", "latest"])):
-        proc = parsph(["run", path, "--out", split, "--quiet", *extra], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(one, split)
-    with h5py.File(one / "history.h5", "r") as f:
-        assert f["step"][-1] == STEPS and np.isfinite(f["total_energy"][()]).all()
+    commands, restarts = [], []
+    for name, bodies in cases.items():
+        path = tmp_path / f"{name}.toml"
+        path.write_text(blocks(bodies))
+        one, split = tmp_path / name / "one", tmp_path / name / "split"
+        commands += [(1, ["run", path, "--out", one, "--quiet"]),
+                     (2, ["run", path, "--out", split, "--quiet", *stopped])]
+        restarts.append((3, ["run", path, "--out", split, "--quiet", "--restart", "latest"]))
+    procs = parsph_by_ranks(commands, tmp_path / "batch")
+    procs += parsph_by_ranks(restarts, tmp_path / "batch_restarts")  # after the stopped runs
+    for (_, argv), proc in zip(commands + restarts, procs):
+        assert proc.returncode == 0, f"{argv}: {proc.stderr}"
+    for name in cases:
+        one, split = tmp_path / name / "one", tmp_path / name / "split"
+        assert_identical_outputs(one, split)
+        with h5py.File(one / "history.h5", "r") as f:
+            assert f["step"][-1] == STEPS and np.isfinite(f["total_energy"][()]).all(), name
 
 
 @pytest.mark.parametrize("key, message", [

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import ROOT, parsph, run_on_ranks
+from conftest import ROOT, parsph, parsph_batch, run_on_ranks
 from parsph import config
 from parsph.build import build_bodies
 from parsph.errors import InputError
@@ -359,9 +359,12 @@ def write_bad_meshes(tmp_path) -> dict:
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_bad_meshes_exit_2_naming_the_file(ranks, tmp_path):
-    for case, (file, message) in write_bad_meshes(tmp_path).items():
-        path = scene_file(tmp_path, file, {"g": 'mesh_set = "B"'} if case == "unknown_set" else {}, name=f"{case}.toml")
-        proc = parsph(["preview", path, "--out", tmp_path / f"out_{case}"], ranks=ranks)
+    """Each case's `parsph preview`, one after another in one MPI job (conftest.parsph_batch)."""
+    cases = write_bad_meshes(tmp_path)
+    commands = [["preview", scene_file(tmp_path, file, {"g": 'mesh_set = "B"'} if case == "unknown_set" else {},
+                                       name=f"{case}.toml"), "--out", tmp_path / f"out_{case}"]
+                for case, (file, _) in cases.items()]
+    for (case, (file, message)), proc in zip(cases.items(), parsph_batch(commands, ranks, tmp_path / "batch")):
         assert proc.returncode == 2, f"{case}: exit {proc.returncode}\n{proc.stderr}"
         assert "Traceback" not in proc.stderr and proc.stderr.count("parsph: error") == 1, proc.stderr
         assert file in proc.stderr and message in proc.stderr, f"{case}: {proc.stderr}"

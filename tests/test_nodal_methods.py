@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import ROOT, assert_it_happened, assert_same_on_ranks
+from conftest import ROOT, assert_each_same_on_ranks, assert_it_happened
 from parsph.analytic import bar_tip_displacement
 from physics import block_2d, run_until, simulation
 
@@ -359,8 +359,8 @@ def test_sph_and_rlm_same_answer_on_1_and_3_ranks(tmp_path):
     """A 24 x 8 plate clamped at the left, its right quarter thrown; 50 steps."""
     scene = tmp_path / "plate.toml"
     scene.write_text(PLATE)
-    for ftype in ("sph", "rlm"):
-        outs = assert_same_on_ranks(scene, ["--set", f'formulation.type="{ftype}"', "--debug"], tmp_path / ftype)
+    cases = [(scene, ["--set", f'formulation.type="{ftype}"', "--debug"], tmp_path / ftype) for ftype in ("sph", "rlm")]
+    for outs in assert_each_same_on_ranks(cases, tmp_path / "batch"):
         assert_it_happened(outs[-1], ranks=3)
 
 
@@ -430,18 +430,22 @@ def test_eulerian_kernel_is_for_sph_rlm_kbm_and_nodal_efg_in_a_scene_of_one_body
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("ftype", ["sph", "kbm", "efg"])
-def test_eulerian_kernel_same_answer_on_1_and_3_ranks_searching_every_step_or_not(tmp_path, ftype):
+def test_eulerian_kernel_same_answer_on_1_and_3_ranks_searching_every_step_or_not(tmp_path):
     """The plate in tension with symmetrised SPH, KBM or nodal EFG and the Eulerian kernel,
     60 steps: neighbours searched (particles migrated and re-ghosted) at every step on one
     rank, at most every 30 steps with a skin (the default) on three: history and final state
-    bit for bit."""
-    from conftest import assert_identical_outputs, parsph
+    bit for bit. The three formulations' runs on one rank count go one after another in one
+    MPI job (conftest.parsph_by_ranks)."""
+    from conftest import assert_identical_outputs, parsph_by_ranks
 
-    common = ["--quiet", "--set", f'formulation.type="{ftype}"', "--set", 'formulation.kernel="eulerian"',
-              "--set", "time.max_steps=60"]
-    outs = [tmp_path / "every_step", tmp_path / "every_30"]
-    for out, ranks, extra in zip(outs, (1, 3), (["--set", "formulation.search_every=1"], [])):
-        proc = parsph(["run", ROOT / "runs" / "plate_tension.toml", "--out", out, *common, *extra], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(*outs)
+    commands, outs = [], {}
+    for ftype in ("sph", "kbm", "efg"):
+        common = ["--quiet", "--set", f'formulation.type="{ftype}"', "--set", 'formulation.kernel="eulerian"',
+                  "--set", "time.max_steps=60"]
+        outs[ftype] = [tmp_path / ftype / "every_step", tmp_path / ftype / "every_30"]
+        for out, ranks, extra in zip(outs[ftype], (1, 3), (["--set", "formulation.search_every=1"], [])):
+            commands.append((ranks, ["run", ROOT / "runs" / "plate_tension.toml", "--out", out, *common, *extra]))
+    for (_, argv), proc in zip(commands, parsph_by_ranks(commands, tmp_path / "batch")):
+        assert proc.returncode == 0, f"{argv}: {proc.stderr}"
+    for ftype in outs:
+        assert_identical_outputs(*outs[ftype])

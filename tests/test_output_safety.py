@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph, wait_for
+from conftest import BAR, CEILING, ROOT, RUNS, mpiexec, parsph, parsph_batch, wait_for
 
 HISTORY = ["--set", "output.history_every=5", "--set", "output.history_interval=0.0"]
 
@@ -100,8 +100,9 @@ def test_a_second_run_into_a_directory_in_use_is_refused_and_a_killed_run_frees_
     try:
         wait_for(lambda: list((out / "checkpoints").glob("step_*.h5")), poll=0.1)
         before = (out / "scene.json").read_bytes()
-        for extra in ([], ["--overwrite"], ["--restart", "latest"]):
-            proc = parsph(["run", bar, "--out", out, "--quiet", "--set", "time.end=1e3", *extra])
+        # the three attempts one after another in one process (conftest.parsph_batch)
+        for proc in parsph_batch([["run", bar, "--out", out, "--quiet", "--set", "time.end=1e3", *extra]
+                                  for extra in ([], ["--overwrite"], ["--restart", "latest"])], 1, tmp_path / "batch"):
             refused(proc, "in use by another run", f"pid {first.pid}")
         assert first.poll() is None, "the first run was disturbed"
         assert (out / "scene.json").read_bytes() == before
@@ -156,27 +157,29 @@ def test_restart_with_a_damaged_history_or_snapshot_file_is_refused(bar, tmp_pat
     data[: len(data) // 2] = bytes(len(data) // 2)  # the superblock and root group zeroed
     path.write_bytes(bytes(data))
     before = files_of(out)
-    proc = parsph(["run", bar, "--out", out, "--quiet", "--restart", "latest", "--set", "time.max_steps=60"])
+    fresh = tmp_path / "fresh"
+    # the refused restart and the advised one (from the checkpoint into a fresh directory) one
+    # after another in one process (conftest.parsph_batch)
+    proc, advised = parsph_batch([
+        ["run", bar, "--out", out, "--quiet", "--restart", "latest", "--set", "time.max_steps=60"],
+        ["run", bar, "--out", fresh, "--restart", out / "checkpoints" / "step_00000040.h5",
+         "--set", "time.max_steps=60", "--quiet"]], 1, tmp_path / "batch")
     refused(proc, damaged, "--restart CHECKPOINT_FILE")
     assert files_of(out) == before
-    # the advice works: continue from the checkpoint into a fresh directory
-    fresh = tmp_path / "fresh"
-    run_ok([bar, "--out", fresh, "--restart", out / "checkpoints" / "step_00000040.h5",
-            "--set", "time.max_steps=60"])
+    assert advised.returncode == 0, advised.stderr  # the advice works
     assert all_series(fresh / "history.h5")["step"][-1] == 60
 
 
 def test_unusable_output_paths_are_refused(bar, tmp_path):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
-    proc = parsph(["run", bar, "--out", blocker / "sub", "--quiet"])
-    refused(proc, "a_file")
-    proc = parsph(["run", bar, "--out", blocker, "--quiet"])
-    refused(proc, "not a directory")
     link = tmp_path / "dangling"
     link.symlink_to(tmp_path / "nowhere")
-    proc = parsph(["run", bar, "--out", link, "--quiet"])
-    refused(proc, "dangling symbolic link")
+    # the three runs one after another in one process (conftest.parsph_batch)
+    procs = parsph_batch([["run", bar, "--out", where, "--quiet"] for where in (blocker / "sub", blocker, link)], 1,
+                         tmp_path / "batch")
+    for proc, words in zip(procs, ("a_file", "not a directory", "dangling symbolic link")):
+        refused(proc, words)
     assert blocker.read_text() == "x"
 
 
@@ -226,15 +229,19 @@ def test_restarted_and_stopped_runs_write_the_same_files_as_a_straight_run(bar, 
     """History rows, snapshots and the XDMF index of a run continued from a checkpoint, and
     of a run stopped by the wall-clock limit and continued, equal those of a straight run."""
     common = [*HISTORY, "--set", "output.snapshot_interval=2e-4", "--set", "time.end=2e-3"]
-    straight = tmp_path / "straight"
-    run_ok([bar, "--out", straight, *common])
-    split = tmp_path / "split"
-    run_ok([bar, "--out", split, *common, "--set", "time.max_steps=37", "--set", "output.checkpoint_every=10"])
+    straight, split, stopped = tmp_path / "straight", tmp_path / "split", tmp_path / "stopped"
+    # the three first runs one after another in one process (conftest.parsph_batch)
+    procs = parsph_batch([["run", bar, "--out", straight, *common, "--quiet"],
+                          ["run", bar, "--out", split, *common, "--set", "time.max_steps=37",
+                           "--set", "output.checkpoint_every=10", "--quiet"],
+                          ["run", bar, "--out", stopped, *common, "--set", "time.wall_limit=1e-9", "--quiet"]],
+                         1, tmp_path / "batch")
+    for proc in procs:
+        assert proc.returncode == 0, proc.stderr
     run_ok([bar, "--out", split, *common, "--restart", "latest"])
     assert_same_run(straight, split)
 
-    stopped = tmp_path / "stopped"
-    proc = run_ok([bar, "--out", stopped, *common, "--set", "time.wall_limit=1e-9"])
+    proc = procs[-1]
     assert "stopped by the wall-clock limit" in proc.stdout
     words = shlex.split(proc.stdout.split("continue with: ")[1].splitlines()[0])
     assert words[:2] == ["parsph", "run"] and "time.wall_limit=1e-9" in words  # the --set options kept

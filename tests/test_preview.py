@@ -11,19 +11,13 @@ import meshio
 import numpy as np
 import pytest
 
-from conftest import RUNS, parsph
+from conftest import RUNS, parsph_batch
 from parsph import preview
 from parsph.walls import Tool
 from physics import typed
 
 SCENES = {"punch": 2, "tensile_failure": 3}  # a 2D scene with a tool, a 3D one of five parts with groups
 RANKS = [pytest.param(1, id="1rank"), pytest.param(2, id="2ranks", marks=pytest.mark.mpi)]
-
-
-def run_preview(out, scene, ranks=1, *args, env=None):
-    proc = parsph(["preview", RUNS / f"{scene}.toml", "--out", out, *args], ranks=ranks, env=env)
-    assert proc.returncode == 0, proc.stderr
-    return proc
 
 
 def particles(out) -> dict:
@@ -42,67 +36,96 @@ def summary(proc) -> list:
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize(("scene", "serial_hdf5"), [("punch", False), ("tensile_failure", False), ("punch", True)])
-def test_the_same_files_on_one_and_two_ranks(scene, serial_hdf5, tmp_path):
-    one = run_preview(tmp_path / "1", scene)
-    two = run_preview(tmp_path / "2", scene, 2, env={"PARSPH_SERIAL_HDF5": "1"} if serial_hdf5 else None)
-    a, b = particles(tmp_path / "1"), particles(tmp_path / "2")
-    assert sorted(a) == sorted(b) and {"position", "body", "volume", "mass", "support", "gid", "rank"} <= set(a)
-    assert np.array_equal(a["gid"], np.arange(len(a["gid"])))  # global-id order
-    for name in a:
-        if name != "rank":
-            assert np.array_equal(a[name], b[name]) and a[name].dtype == b[name].dtype, name
-    assert set(b["rank"]) == {0, 1} and set(a["rank"]) == {0}
-    assert (tmp_path / "1" / "particles.xdmf").read_text() == (tmp_path / "2" / "particles.xdmf").read_text()
-    assert summary(one) == summary(two) and summary(one)
-    if scene == "punch":  # the tool
-        tools = [meshio.read(tmp_path / n / "obstacles.xdmf") for n in ("1", "2")]
-        assert np.array_equal(tools[0].points, tools[1].points) and len(tools[0].cells[0].data) == 64
-    for n in ("1", "2"):
-        assert (tmp_path / n / "particles.png").stat().st_size > 1000
+def test_the_same_files_on_one_and_two_ranks(tmp_path):
+    """Each scene's preview on two ranks (and punch's with serial HDF5 too) against its
+    preview on one. The previews on one rank count (and environment) go one after another
+    in one MPI job (conftest.parsph_batch): three jobs instead of six."""
+    def previews(ranks, scenes, folder, env=None):
+        procs = parsph_batch([["preview", RUNS / f"{scene}.toml", "--out", tmp_path / folder / scene]
+                              for scene in scenes], ranks, tmp_path / f"batch_{folder}", env=env)
+        for proc in procs:
+            assert proc.returncode == 0, proc.stderr
+        return dict(zip(scenes, procs))
+
+    ones = previews(1, SCENES, "1")
+    cases = [(scene, "2", proc) for scene, proc in previews(2, SCENES, "2").items()]
+    cases += [("punch", "2_serial", previews(2, ["punch"], "2_serial", env={"PARSPH_SERIAL_HDF5": "1"})["punch"])]
+    for scene, folder, two in cases:
+        one_dir, two_dir = tmp_path / "1" / scene, tmp_path / folder / scene
+        a, b = particles(one_dir), particles(two_dir)
+        assert sorted(a) == sorted(b) and {"position", "body", "volume", "mass", "support", "gid", "rank"} <= set(a)
+        assert np.array_equal(a["gid"], np.arange(len(a["gid"])))  # global-id order
+        for name in a:
+            if name != "rank":
+                assert np.array_equal(a[name], b[name]) and a[name].dtype == b[name].dtype, (folder, scene, name)
+        assert set(b["rank"]) == {0, 1} and set(a["rank"]) == {0}
+        assert (one_dir / "particles.xdmf").read_text() == (two_dir / "particles.xdmf").read_text()
+        assert summary(ones[scene]) == summary(two) and summary(ones[scene])
+        if scene == "punch":  # the tool
+            tools = [meshio.read(d / "obstacles.xdmf") for d in (one_dir, two_dir)]
+            assert np.array_equal(tools[0].points, tools[1].points) and len(tools[0].cells[0].data) == 64
+        for d in (one_dir, two_dir):
+            assert (d / "particles.png").stat().st_size > 1000
 
 
-@pytest.mark.parametrize("scene", SCENES)
-def test_what_is_written_is_what_a_run_starts_from(scene, tmp_path):
+def test_what_is_written_is_what_a_run_starts_from(tmp_path):
     """Volumes and masses row for row as the run's snapshot has them (summing to the run's);
-    the XDMF reads back with meshio; `parsph plot` and the summary read the same file."""
-    proc = run_preview(tmp_path / "preview", scene)
-    run = parsph(["run", RUNS / f"{scene}.toml", "--out", tmp_path / "run", "--quiet", "--set", "time.max_steps=1",
-                  "--set", 'output.snapshot_fields=["position", "volume", "mass", "body"]'])
-    assert run.returncode == 0, run.stderr
-    with h5py.File(tmp_path / "run" / "snapshots.h5", "r") as f:
-        ran = {name: f["step_00000001"][name][()] for name in ("volume", "mass", "body", "gid")}
-    shown = particles(tmp_path / "preview")
-    for name in ran:
-        assert np.array_equal(shown[name], ran[name]), name
-    assert shown["volume"].sum() == ran["volume"].sum()
-    if scene == "tensile_failure":  # five boxes: 5375 mm^3; groups from the scene's boxes
-        assert shown["volume"].sum() == pytest.approx(5.375e-6, rel=1e-12)
-        assert "volume 5.375e-06 m^3" in proc.stdout and "group 'held'" in proc.stdout
-        assert shown["group_held"].dtype == np.uint8 and 0 < shown["group_held"].sum() < len(shown["gid"])
-    mesh = meshio.read(tmp_path / "preview" / "particles.xdmf")
-    assert np.array_equal(mesh.points[:, :SCENES[scene]], shown["position"][:, :SCENES[scene]])
-    assert np.array_equal(mesh.point_data["volume"], shown["volume"])
-    assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(shown["gid"])
+    the XDMF reads back with meshio; `parsph plot` and the summary read the same file. Each
+    scene's preview and one-step run go one after another in one process
+    (conftest.parsph_batch)."""
+    commands = []
+    for scene in SCENES:
+        commands += [["preview", RUNS / f"{scene}.toml", "--out", tmp_path / scene / "preview"],
+                     ["run", RUNS / f"{scene}.toml", "--out", tmp_path / scene / "run", "--quiet",
+                      "--set", "time.max_steps=1",
+                      "--set", 'output.snapshot_fields=["position", "volume", "mass", "body"]']]
+    procs = parsph_batch(commands, 1, tmp_path / "batch")
+    for k, scene in enumerate(SCENES):
+        proc, run = procs[2 * k: 2 * k + 2]
+        assert proc.returncode == 0, proc.stderr
+        assert run.returncode == 0, run.stderr
+        with h5py.File(tmp_path / scene / "run" / "snapshots.h5", "r") as f:
+            ran = {name: f["step_00000001"][name][()] for name in ("volume", "mass", "body", "gid")}
+        shown = particles(tmp_path / scene / "preview")
+        for name in ran:
+            assert np.array_equal(shown[name], ran[name]), (scene, name)
+        assert shown["volume"].sum() == ran["volume"].sum()
+        if scene == "tensile_failure":  # five boxes: 5375 mm^3; groups from the scene's boxes
+            assert shown["volume"].sum() == pytest.approx(5.375e-6, rel=1e-12)
+            assert "volume 5.375e-06 m^3" in proc.stdout and "group 'held'" in proc.stdout
+            assert shown["group_held"].dtype == np.uint8 and 0 < shown["group_held"].sum() < len(shown["gid"])
+        mesh = meshio.read(tmp_path / scene / "preview" / "particles.xdmf")
+        assert np.array_equal(mesh.points[:, :SCENES[scene]], shown["position"][:, :SCENES[scene]])
+        assert np.array_equal(mesh.point_data["volume"], shown["volume"])
+        assert mesh.cells[0].type == "vertex" and len(mesh.cells[0].data) == len(shown["gid"])
 
 
 @pytest.mark.parametrize("ranks", RANKS)
 def test_bad_input_and_an_occupied_output_directory(ranks, tmp_path):
-    bad = parsph(["preview", RUNS / "punch.toml", "--out", tmp_path / "p", "--set", "material.density=-1"], ranks=ranks)
+    """Bad input is refused; a directory holding a preview is refused, and kept when the
+    scene given with --overwrite is bad; a good one with --overwrite replaces it. The
+    command lines run one after another in two MPI jobs (conftest.parsph_batch): the first
+    writes the previews `p` and `q`, the second runs into them."""
+    p, q = tmp_path / "p", tmp_path / "q"
+    punch = RUNS / "punch.toml"
+    bad, missing, *written = parsph_batch([["preview", punch, "--out", p, "--set", "material.density=-1"],
+                                           ["preview", tmp_path / "none.toml"],
+                                           ["preview", punch, "--out", p], ["preview", punch, "--out", q]],
+                                          ranks, tmp_path / "batch1")
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and bad.stdout == ""
     assert bad.stderr.count("parsph: error: material.density must be > 0") == 1, bad.stderr
-    missing = parsph(["preview", tmp_path / "none.toml"], ranks=ranks)
     assert missing.returncode == 2 and missing.stderr.count("scene file not found") == 1
-    out = tmp_path / "p"
-    run_preview(out, "punch", ranks)
-    before = (out / "particles.h5").read_bytes()
-    again = parsph(["preview", RUNS / "punch.toml", "--out", out], ranks=ranks)
+    for proc in written:
+        assert proc.returncode == 0, proc.stderr
+    before = {out: (out / "particles.h5").read_bytes() for out in (p, q)}
+    again, worse, better = parsph_batch([["preview", punch, "--out", p],
+                                         ["preview", punch, "--out", p, "--overwrite", "--set", "kernel.support=0"],
+                                         ["preview", punch, "--out", q, "--overwrite", "--set", "parameters.n=3"]],
+                                        ranks, tmp_path / "batch2")
     assert again.returncode == 2 and again.stderr.count("already holds a preview") == 1
-    worse = parsph(["preview", RUNS / "punch.toml", "--out", out, "--overwrite", "--set", "kernel.support=0"],
-                   ranks=ranks)
-    assert worse.returncode == 2 and (out / "particles.h5").read_bytes() == before  # kept: the new scene is bad
-    run_preview(out, "punch", ranks, "--overwrite", "--set", "parameters.n=3")
-    assert (out / "particles.h5").read_bytes() != before
+    assert worse.returncode == 2 and (p / "particles.h5").read_bytes() == before[p]  # kept: the new scene is bad
+    assert better.returncode == 0, better.stderr
+    assert (q / "particles.h5").read_bytes() != before[q]
 
 
 def test_a_tool_is_its_rounded_box():

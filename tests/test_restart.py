@@ -12,7 +12,8 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import CEILING, ROOT, RUNS, kill_processes_mentioning, mpiexec, parsph, wait_for
+from conftest import (CEILING, ROOT, RUNS, assert_runs_by_ranks, kill_processes_mentioning, mpiexec, parsph,
+                      parsph_batch, wait_for)
 from parsph.io import read_history, read_snapshots
 
 FIELDS = '["position","velocity","J"]'
@@ -75,10 +76,12 @@ def test_updated_reference_restart_continues_bit_for_bit(tmp_path):
     # 50 m/s, faster than the rubber's waves: the ring is crushed at t = 0.3 ms; 40 steps at
     # time.cfl = 0.3 end before
     ring = ["--set", "parameters.spacing=4e-3", "--set", "initial.0.value=[-50.0, 0.0]", "--set", "time.cfl=0.3"]
-    straight = tmp_path / "straight"
-    run(straight, 2, "--set", "time.max_steps=40", *ring, scene="rings")
-    split = tmp_path / "split"
-    run(split, 2, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=20", *ring, scene="rings")
+    straight, split = tmp_path / "straight", tmp_path / "split"
+    rings = ["run", RUNS / "rings.toml", "--quiet", *PATCH, *ring, "--out"]
+    # the straight and the stopped run in one MPI job (conftest.parsph_by_ranks), then the restart
+    assert_runs_by_ranks([(2, [*rings, straight, "--set", "time.max_steps=40"]),
+                          (2, [*rings, split, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=20"])],
+                         tmp_path / "batch")
     run(split, 3, "--set", "time.max_steps=40", "--restart", "latest", *ring, scene="rings")
     _, a = final(straight)
     _, b = final(split)
@@ -90,37 +93,47 @@ def test_updated_reference_restart_continues_bit_for_bit(tmp_path):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("scene", ["taylor_impact", "ring_shear_bands"])
-def test_plastic_state_restart_continues_bit_for_bit(tmp_path, scene):
+def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
     """Taylor bar (J2 plasticity at the particles, wall contact) and steel ring (at KBM's
     stress points too): a checkpoint while they yield (step 40), restarted on another rank
-    count, continues exactly, plastic strain and energies too."""
+    count, continues exactly, plastic strain and energies too. The two scenes' straight and
+    stopped runs go in one MPI job (conftest.parsph_by_ranks), then their restarts in one."""
     names = ("position", "velocity", "J", "plastic_strain", "plastic_work")
     fields = ["--set", "output.snapshot_fields=" + str(list(names)).replace("'", '"')]
-    straight = tmp_path / "straight"
-    run(straight, 2, "--set", "time.max_steps=80", *fields, scene=scene)
-    split = tmp_path / "split"
-    run(split, 2, "--set", "time.max_steps=40", "--set", "output.checkpoint_every=40", *fields, scene=scene)
-    run(split, 3, "--set", "time.max_steps=80", "--restart", "latest", *fields, scene=scene)
-    _, a = final(straight, names)
-    _, b = final(split, names)
-    assert a["plastic_strain"].max() > 0
-    for field in a:
-        assert np.array_equal(a[field], b[field]), field
-    ha, hb = history(straight), history(split)
-    for name in ("plastic_work", "external_work", "total_energy"):
-        assert np.array_equal(ha[name], hb[name]), name
+    scenes = ("taylor_impact", "ring_shear_bands")
+
+    def command(scene, out, *extra):
+        return ["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *extra, *fields]
+
+    assert_runs_by_ranks([(2, command(scene, tmp_path / scene / out, *extra)) for scene in scenes
+                          for out, extra in (("straight", ["--set", "time.max_steps=80"]),
+                                             ("split", ["--set", "time.max_steps=40",
+                                                        "--set", "output.checkpoint_every=40"]))],
+                         tmp_path / "batch")
+    assert_runs_by_ranks([(3, command(scene, tmp_path / scene / "split", "--set", "time.max_steps=80",
+                                      "--restart", "latest")) for scene in scenes], tmp_path / "batch_restart")
+    for scene in scenes:
+        _, a = final(tmp_path / scene / "straight", names)
+        _, b = final(tmp_path / scene / "split", names)
+        assert a["plastic_strain"].max() > 0, scene
+        for field in a:
+            assert np.array_equal(a[field], b[field]), (scene, field)
+        ha, hb = history(tmp_path / scene / "straight"), history(tmp_path / scene / "split")
+        for name in ("plastic_work", "external_work", "total_energy"):
+            assert np.array_equal(ha[name], hb[name]), (scene, name)
 
 
 def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
     out = tmp_path / "run"
     run(out, 1, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10")
-    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest",
-                   "--set", "material.density=2.0", "--set", "formulation.hourglass=10"])
-    assert proc.returncode == 2
-    assert "material.density" in proc.stderr and "formulation.hourglass" in proc.stderr
-    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.end=0.4"])
+    # the refused restart and the allowed one one after another in one process (conftest.parsph_batch)
+    refusal, proc = parsph_batch([
+        ["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest",
+         "--set", "material.density=2.0", "--set", "formulation.hourglass=10"],
+        ["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+         *PATCH, "--set", "time.end=0.4"]], 1, tmp_path / "batch")
+    assert refusal.returncode == 2
+    assert "material.density" in refusal.stderr and "formulation.hourglass" in refusal.stderr
     assert proc.returncode == 0, proc.stderr
     with h5py.File(out / "history.h5", "r") as f:
         assert f["time"][-1] >= 0.4
@@ -129,9 +142,13 @@ def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
 @pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
 def test_restart_refusal_names_the_changed_keys_of_bodies_and_contact(tmp_path, ranks):
     out = tmp_path / "run"
-    run(out, ranks, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10", scene="bars_impact")
-    proc = parsph(["run", RUNS / "bars_impact.toml", "--out", out, "--restart", "latest", *PATCH,
-                   "--set", "contact.0.stiffness=2.0", "--set", "bodies.1.material.density=7000.0"], ranks=ranks)
+    # the run and the refused restart one after another in one MPI job (conftest.parsph_batch)
+    first, proc = parsph_batch([
+        ["run", RUNS / "bars_impact.toml", "--out", out, "--quiet", *PATCH, "--set", "time.max_steps=20",
+         "--set", "output.checkpoint_every=10"],
+        ["run", RUNS / "bars_impact.toml", "--out", out, "--restart", "latest", *PATCH,
+         "--set", "contact.0.stiffness=2.0", "--set", "bodies.1.material.density=7000.0"]], ranks, tmp_path / "batch")
+    assert first.returncode == 0, first.stderr
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.count("parsph: error") == 1, proc.stderr
     assert "differs from checkpoint" in proc.stderr
@@ -157,11 +174,13 @@ def test_corrupt_and_truncated_checkpoints_are_refused_and_latest_skips_them(tmp
     newest.write_bytes(bytes(data))
     middle = folder / names[-2]
     middle.write_bytes(middle.read_bytes()[:2000])
-    for path, why in ((newest, "is damaged"), (middle, "is damaged or truncated")):
-        proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", path], ranks=ranks)
-        assert proc.returncode == 2 and why in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
-    proc = parsph(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
-                   *PATCH, "--set", "time.max_steps=40"], ranks=ranks)
+    # the two refusals and the restart one after another in one MPI job (conftest.parsph_batch)
+    commands = [["run", RUNS / "patch_random.toml", "--out", out, "--restart", path] for path in (newest, middle)]
+    commands.append(["run", RUNS / "patch_random.toml", "--out", out, "--restart", "latest", "--quiet",
+                     *PATCH, "--set", "time.max_steps=40"])
+    *refusals, proc = parsph_batch(commands, ranks, tmp_path / "batch")
+    for refusal, why in zip(refusals, ("is damaged", "is damaged or truncated")):
+        assert refusal.returncode == 2 and why in refusal.stderr and "Traceback" not in refusal.stderr, refusal.stderr
     assert proc.returncode == 0, proc.stderr
     assert "skipping checkpoint" in proc.stdout
     assert "step_00000010.h5" in proc.stdout.split("restarting from")[1].splitlines()[0]

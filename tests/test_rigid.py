@@ -17,8 +17,8 @@ from parsph import readouts
 from parsph.errors import InputError
 from physics import run_until, simulation
 
-from conftest import (CEILING, assert_identical_outputs, assert_same_on_ranks, kill_processes_mentioning, mpiexec,
-                      parsph, wait_for)
+from conftest import (CEILING, assert_identical_outputs, assert_runs_by_ranks, assert_same_on_ranks,
+                      kill_processes_mentioning, mpiexec, parsph, wait_for)
 
 DISK = """
 [scene]
@@ -271,13 +271,15 @@ def test_rigid_body_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     scene = tmp_path / "rigid_disk.toml"
     scene.write_text(DISK + "[output]\nhistory_every = 5\n")
     steps = ["--set", "time.max_steps=300"]
-    assert_same_on_ranks(scene, steps, tmp_path)
     split = tmp_path / "split"
-    proc = parsph(["run", scene, "--out", split, "--quiet", "--set", "time.max_steps=150", "--set",
-                   "output.checkpoint_every=150"], ranks=2)
-    assert proc.returncode == 0, proc.stderr
-    proc = parsph(["run", scene, "--out", split, "--quiet", *steps, "--restart", "latest"], ranks=3)
-    assert proc.returncode == 0, proc.stderr
+    # three MPI jobs (conftest.parsph_by_ranks): one rank; two ranks; three ranks straight and restarted
+    assert_runs_by_ranks([(1, ["run", scene, "--out", tmp_path / "ranks_1", "--quiet", *steps]),
+                          (2, ["run", scene, "--out", split, "--quiet", "--set", "time.max_steps=150", "--set",
+                               "output.checkpoint_every=150"])], tmp_path / "batch")
+    assert_runs_by_ranks([(3, ["run", scene, "--out", tmp_path / "ranks_3", "--quiet", *steps]),
+                          (3, ["run", scene, "--out", split, "--quiet", *steps, "--restart", "latest"])],
+                         tmp_path / "batch_restart")
+    assert_identical_outputs(tmp_path / "ranks_1", tmp_path / "ranks_3")
     assert_identical_outputs(tmp_path / "ranks_1", split)
 
 

@@ -18,7 +18,7 @@ from parsph import preview
 from parsph.io import read_history
 from physics import run_until, simulation, soft_solid
 
-from conftest import ROOT, RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+from conftest import ROOT, RUNS, assert_identical_outputs, assert_runs_by_ranks, assert_same_on_ranks, parsph_batch
 
 sys.path.insert(0, str(ROOT / "tools"))
 import measure  # noqa: E402
@@ -241,21 +241,30 @@ BAD = {
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", (1, 2))
-@pytest.mark.parametrize("case", sorted(BAD))
-def test_a_bad_surface_is_refused_naming_the_file(case, ranks, tmp_path, plane):
+def test_a_bad_surface_is_refused_naming_the_file(ranks, tmp_path, plane):
     """A missing file, one no reader understands, one without triangles, one with a
     triangle of zero area, one with a triangle turned against its neighbour, and an unknown
-    group: exit 2 on every rank with a message naming the key and the file, no traceback."""
-    content, message = BAD[case]
-    name = {"missing": "absent.stl", "unreadable": "bad.ply", "group": plane}.get(case, "bad.obj")
-    if content is not None:
-        (tmp_path / name).write_bytes(content)
-    scene = tmp_path / "scene.toml"
-    scene.write_text(BLOCK + surface(name, 'group = "tool"' if case == "group" else ""))
-    proc = parsph(["run", scene, "--out", tmp_path / "out", "--quiet"], ranks=ranks)
-    assert proc.returncode == 2, proc.stderr
-    assert re.search(message, proc.stderr), proc.stderr
-    assert "Traceback" not in proc.stderr
+    group: exit 2 on every rank with a message naming the key and the file, no traceback.
+    The cases run one after another in one MPI job (conftest.parsph_batch)."""
+    commands = []
+    for case, (content, _) in sorted(BAD.items()):
+        folder = tmp_path / case
+        folder.mkdir()
+        name = {"missing": "absent.stl", "unreadable": "bad.ply", "group": plane}.get(case, "bad.obj")
+        if content is not None:
+            (folder / name).write_bytes(content)
+        scene = folder / "scene.toml"
+        scene.write_text(BLOCK + surface(name, 'group = "tool"' if case == "group" else ""))
+        commands.append(["run", scene, "--out", folder / "out", "--quiet"])
+    failures = []
+    for (case, (_, message)), proc in zip(sorted(BAD.items()), parsph_batch(commands, ranks, tmp_path / "batch")):
+        try:
+            assert proc.returncode == 2, proc.stderr
+            assert re.search(message, proc.stderr), proc.stderr
+            assert "Traceback" not in proc.stderr
+        except AssertionError as exc:
+            failures.append(f"{case}: {exc}")
+    assert not failures, "\n\n".join(failures)
 
 
 def test_a_2d_outline_reads_the_same_from_csv_and_dxf_turned_counter_clockwise(tmp_path):
@@ -308,10 +317,11 @@ def test_a_run_with_a_surface_restarts_bit_for_bit(tmp_path):
               "--set", "output.history_interval=0.0"]
     straight, split = tmp_path / "straight", tmp_path / "split"
     scene = RUNS / "punch_stl.toml"
-    for out, ranks, extra in ((straight, 1, ["--set", "time.max_steps=40"]),
-                              (split, 1, ["--set", "time.max_steps=20", "--set", "output.checkpoint_every=20"]),
-                              (split, 2, ["--set", "time.max_steps=40", "--restart", "latest"])):
-        proc = parsph(["run", scene, "--out", out, *common, *extra], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
+    # the straight and the stopped run in one job (conftest.parsph_by_ranks), then the restart
+    assert_runs_by_ranks([(1, ["run", scene, "--out", straight, *common, "--set", "time.max_steps=40"]),
+                          (1, ["run", scene, "--out", split, *common, "--set", "time.max_steps=20",
+                               "--set", "output.checkpoint_every=20"])], tmp_path / "batch")
+    assert_runs_by_ranks([(2, ["run", scene, "--out", split, *common, "--set", "time.max_steps=40",
+                               "--restart", "latest"])], tmp_path / "batch_restart")
     assert_identical_outputs(straight, split)
     assert np.abs(read_history(split)["surface0_torque_z"]).max() > 0.0

@@ -141,20 +141,22 @@ def test_quarter_in_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tm
     """runs/punch_hertz_quarter.toml at 0.12 mm, 600 steps (the plate presses from the start):
     the same history and final state bit for bit on 1 and 3 ranks, and a run checkpointed
     on 2 ranks, restarted on 3, continues exactly; the plate's contact force is not zero."""
-    from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+    from conftest import RUNS, assert_identical_outputs, assert_runs_by_ranks
     from parsph.io import read_history
 
     scene = RUNS / "punch_hertz_quarter.toml"
     coarse = ["--set", "parameters.spacing=1.2e-4", "--set", "time.max_steps=600",
               "--set", "output.history_interval=0", "--set", "output.history_every=50"]
-    assert_same_on_ranks(scene, coarse, tmp_path / "quarter")
-    split = tmp_path / "split"
-    proc = parsph(["run", scene, "--out", split, "--quiet", *coarse, "--set", "time.max_steps=300",
-                   "--set", "output.checkpoint_every=300"], ranks=2)
-    assert proc.returncode == 0, proc.stderr
-    proc = parsph(["run", scene, "--out", split, "--quiet", *coarse, "--restart", "latest"], ranks=3)
-    assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(tmp_path / "quarter" / "ranks_1", split)
+    one, three, split = tmp_path / "quarter" / "ranks_1", tmp_path / "quarter" / "ranks_3", tmp_path / "split"
+    # three MPI jobs (conftest.parsph_by_ranks): one rank; two ranks; three ranks straight and restarted
+    assert_runs_by_ranks([(1, ["run", scene, "--out", one, "--quiet", *coarse]),
+                          (2, ["run", scene, "--out", split, "--quiet", *coarse, "--set", "time.max_steps=300",
+                               "--set", "output.checkpoint_every=300"])], tmp_path / "batch")
+    assert_runs_by_ranks([(3, ["run", scene, "--out", three, "--quiet", *coarse]),
+                          (3, ["run", scene, "--out", split, "--quiet", *coarse, "--restart", "latest"])],
+                         tmp_path / "batch_restart")
+    assert_identical_outputs(one, three)
+    assert_identical_outputs(one, split)
     force = read_history(tmp_path / "quarter" / "ranks_1")["contact_force_y.block.top"]
     assert force[-1] < -1e4
 
@@ -180,18 +182,23 @@ def test_quarter_with_kept_lists_moves_as_with_a_search_at_every_update(formulat
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("formulation", KEPT)
-def test_quarter_with_kept_lists_is_the_same_on_1_and_3_ranks(tmp_path, formulation):
-    """The same, 80 steps as runs: searching at every update on one rank and keeping the
-    lists for up to 30 updates on three give the same history and final state bit for bit."""
-    from conftest import assert_identical_outputs, parsph
+def test_quarter_with_kept_lists_is_the_same_on_1_and_3_ranks(tmp_path):
+    """The same, 80 steps as runs, for each of KEPT: searching at every update on one rank
+    and keeping the lists for up to 30 updates on three give the same history and final
+    state bit for bit. The formulations' runs on one rank count go one after another in one
+    MPI job (conftest.parsph_by_ranks)."""
+    from conftest import assert_identical_outputs, parsph_by_ranks
 
-    outs = []
-    for every, ranks in ((1, 1), (30, 3)):
-        scene = tmp_path / f"kept_{every}.toml"
-        scene.write_text(pressed_block(True, f"{formulation}\nsearch_every = {every}")
-                         + "[output]\nhistory_every = 20\n")
-        outs.append(tmp_path / f"out_{every}")
-        proc = parsph(["run", scene, "--out", outs[-1], "--quiet", "--set", "time.max_steps=80"], ranks=ranks)
-        assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(*outs)
+    commands, outs = [], []
+    for k, formulation in enumerate(KEPT):
+        outs.append([])
+        for every, ranks in ((1, 1), (30, 3)):
+            scene = tmp_path / f"kept_{k}_{every}.toml"
+            scene.write_text(pressed_block(True, f"{formulation}\nsearch_every = {every}")
+                             + "[output]\nhistory_every = 20\n")
+            outs[-1].append(tmp_path / f"out_{k}_{every}")
+            commands.append((ranks, ["run", scene, "--out", outs[-1][-1], "--quiet", "--set", "time.max_steps=80"]))
+    for (_, argv), proc in zip(commands, parsph_by_ranks(commands, tmp_path / "batch")):
+        assert proc.returncode == 0, f"{argv}: {proc.stderr}"
+    for pair in outs:
+        assert_identical_outputs(*pair)

@@ -15,7 +15,7 @@ from parsph.io import read_history
 from parsph.ties import _tie
 from physics import run_until, simulation
 
-from conftest import RUNS, assert_identical_outputs, assert_same_on_ranks, parsph
+from conftest import RUNS, assert_identical_outputs, assert_runs_by_ranks, parsph
 
 SCENE = (RUNS / "bonded_bars.toml").read_text()
 WAVE_SPEED = math.sqrt(200.0e9 / 7850.0)
@@ -219,23 +219,22 @@ def test_ties_are_the_same_on_1_2_and_3_ranks_and_across_a_restart_after_the_bre
     history and final state bit for bit on 1, 2 and 3 ranks, and a run checkpointed on 2
     ranks after the tie broke, restarted on 3, continues exactly; the tie did break."""
     coarse = ["--set", "parameters.spacing=1e-3", "--set", "time.end=4e-5"]
-    assert_same_on_ranks(RUNS / "bonded_bars.toml", coarse, tmp_path / "bars", ranks=(1, 2))
-    proc = parsph(["run", RUNS / "bonded_bars.toml", "--out", tmp_path / "bars" / "ranks_3", "--quiet", *coarse],
-                  ranks=3)
-    assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(tmp_path / "bars" / "ranks_1", tmp_path / "bars" / "ranks_3")
-    history = read_history(tmp_path / "bars" / "ranks_1")
+    scene = RUNS / "bonded_bars.toml"
+    bars, split = tmp_path / "bars", tmp_path / "split"
+    # three MPI jobs (conftest.parsph_by_ranks): one rank; two ranks straight and stopped;
+    # three ranks straight and restarted
+    assert_runs_by_ranks([(n, ["run", scene, "--out", bars / f"ranks_{n}", "--quiet", *coarse]) for n in (1, 2)]
+                         + [(2, ["run", scene, "--out", split, "--quiet", *coarse, "--set", "time.max_steps=400",
+                                 "--set", "output.checkpoint_every=400"])], tmp_path / "batch")
+    assert read_history(split)["tie_released"][-1] > 0.0  # the checkpoint has the tie broken
+    assert_runs_by_ranks([(3, ["run", scene, "--out", bars / "ranks_3", "--quiet", *coarse]),
+                          (3, ["run", scene, "--out", split, "--quiet", *coarse, "--restart", "latest"])],
+                         tmp_path / "batch_restart")
+    for other in (bars / "ranks_2", bars / "ranks_3", split):
+        assert_identical_outputs(bars / "ranks_1", other)
+    history = read_history(bars / "ranks_1")
     assert history["ties_broken.left.right"][-1] == 1.0 and history["tie_energy"][-1] == 0.0
     assert history["tie_force_x.left.right"].max() > 0.9 * STRENGTH * AREA  # it carried its strength
-    split = tmp_path / "split"
-    proc = parsph(["run", RUNS / "bonded_bars.toml", "--out", split, "--quiet", *coarse, "--set",
-                   "time.max_steps=400", "--set", "output.checkpoint_every=400"], ranks=2)
-    assert proc.returncode == 0, proc.stderr
-    assert read_history(split)["tie_released"][-1] > 0.0  # the checkpoint has the tie broken
-    proc = parsph(["run", RUNS / "bonded_bars.toml", "--out", split, "--quiet", *coarse, "--restart", "latest"],
-                  ranks=3)
-    assert proc.returncode == 0, proc.stderr
-    assert_identical_outputs(tmp_path / "bars" / "ranks_1", split)
 
 
 @pytest.mark.parametrize("tie, message", [

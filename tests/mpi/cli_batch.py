@@ -4,6 +4,9 @@ start-up, ~1 s of CPU per rank, is most of such a case's time). For each case ev
 calls parsph.cli.main with the case's arguments, as `python -m parsph` does, with its
 standard output and error going to files of its own; the exit code is main's return value
 (or SystemExit's code: argparse's usage errors). Rank 0 writes every rank's exit codes.
+A run holds its output directory's lock until its process ends (parsph.io.output_dir): after
+each case the lock is dropped, as that end would drop it, so that a later case may use the
+directory (a restart of the run, a refusal of its checkpoint).
 
 usage: mpiexec -n P python cli_batch.py CASES.json RESULTS.json
   CASES.json: [{"argv": [...], "out": PREFIX}, ...]; rank r writes PREFIX.r.stdout and
@@ -17,6 +20,7 @@ import sys
 from mpi4py import MPI
 
 from parsph import cli
+from parsph.io import output_dir
 
 comm = MPI.COMM_WORLD
 
@@ -41,6 +45,9 @@ def run_case(argv: list, prefix: str) -> int:
             os.dup2(saved[1], 2)
             os.close(saved[0])
             os.close(saved[1])
+            if output_dir._lock_fd is not None:  # the lock the process's end would drop
+                os.close(output_dir._lock_fd)
+                output_dir._lock_fd = None
     return code
 
 
