@@ -348,52 +348,44 @@ def assert_bad_input(proc, expect: list[str]) -> None:
     assert err.count(expect[0]) == 1, err
 
 
-def test_bad_input_exit_2_with_one_clear_message(tmp_path):
-    """Each case on one rank: scene errors (found by config.load, the same code for `check`
-    and `run`) as `check`, errors only `run` finds as `run`: exit code 2, one message,
-    nothing printed to stdout, nothing run. The cases run one after another in one process
-    (conftest.parsph_batch): a process per case would spend most of its time starting. The
-    cases under two ranks are test_bad_input_under_two_ranks_exit_2_with_one_clear_message."""
+def assert_cases_refused(names: list, ranks: int, tmp_path) -> None:
+    """The BAD_INPUT cases `names` one after another in one job of `ranks` ranks
+    (conftest.parsph_batch: a process per case would spend most of its time starting): on one
+    rank scene errors (found by config.load, the same code for `check` and `run`) as `check`
+    and errors only `run` finds as `run`, on more as `run`. Each: exit code 2, one message,
+    nothing printed to stdout, nothing run; the failures reported by case."""
     commands, outs = [], []
-    for name, case in BAD_INPUT.items():
-        folder = tmp_path / name
+    for name in names:
+        case, folder = BAD_INPUT[name], tmp_path / name
         folder.mkdir()
         outs.append(folder / "out")
         path = case.make(folder)
-        args = ["run", path, "--out", outs[-1], *QUICK] if case.build else ["check", path]
+        args = ["run", path, "--out", outs[-1], *QUICK] if case.build or ranks > 1 else ["check", path]
         commands.append([*args, *case.args])
     failures = []
-    for name, out, proc in zip(BAD_INPUT, outs, parsph_batch(commands, 1, tmp_path / "batch")):
+    for name, out, proc in zip(names, outs, parsph_batch(commands, ranks, tmp_path / "batch")):
         try:
             assert_bad_input(proc, BAD_INPUT[name].expect)
             assert proc.stdout == "", proc.stdout
             assert not (out / "history.h5").exists()  # nothing was run
         except AssertionError as exc:
             failures.append(f"{name}: {exc}")
-    assert len(BAD_INPUT) > 40 and not failures, "\n\n".join(failures)
+    assert not failures, "\n\n".join(failures)
+
+
+def test_bad_input_exit_2_with_one_clear_message(tmp_path):
+    """Every case on one rank."""
+    assert len(BAD_INPUT) > 40
+    assert_cases_refused(list(BAD_INPUT), 1, tmp_path)
 
 
 @pytest.mark.mpi
 def test_bad_input_under_two_ranks_exit_2_with_one_clear_message(tmp_path):
-    """Every case (but the variants of another) as `run` under mpiexec -n 2: exit code 2 on
-    every rank, one message from rank 0, nothing run. The cases run one after another in one
-    MPI job (conftest.parsph_batch): a job per case would spend most of its time starting."""
+    """Every case but the variants of another under mpiexec -n 2: the error on every rank,
+    its message from rank 0 once."""
     names = [name for name, case in BAD_INPUT.items() if case.two_ranks]
-    commands, outs = [], []
-    for name in names:
-        folder = tmp_path / name
-        folder.mkdir()
-        outs.append(folder / "out")
-        commands.append(["run", BAD_INPUT[name].make(folder), "--out", outs[-1], *QUICK, *BAD_INPUT[name].args])
-    failures = []
-    for name, out, proc in zip(names, outs, parsph_batch(commands, 2, tmp_path / "batch")):
-        try:
-            assert_bad_input(proc, BAD_INPUT[name].expect)
-            assert proc.stdout == "", proc.stdout
-            assert not (out / "history.h5").exists()  # nothing was run
-        except AssertionError as exc:
-            failures.append(f"{name}: {exc}")
-    assert len(names) > 30 and not failures, "\n\n".join(failures)
+    assert len(names) > 30
+    assert_cases_refused(names, 2, tmp_path)
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
