@@ -58,10 +58,18 @@ def add_impulses(dt, f_old, f_new, X, u_old, u_new, impulse, angular):
 
 
 @njit(cache=True, _nrt=False)
-def step_work(c, f_old, f_new, du, out, dt, mass, v_half, dv, moved, force_old, force):
+def step_work(c, f_old, f_new, du, out):
     """out = c (f_old + f_new) du per particle and component: the trapezoidal work of a force
-    f over the step's displacement du (c = 1/2; -1/2 for the work a force absorbs). With
-    obstacles (dv with rows; else empty) it adds their work in the step as the
+    f over the step's displacement du (c = 1/2; -1/2 for the work a force absorbs)."""
+    n, dim = out.shape
+    for i in range(n):
+        for a in range(dim):
+            out[i, a] = c * (f_old[i, a] + f_new[i, a]) * du[i, a]
+
+
+@njit(cache=True, _nrt=False)
+def add_obstacle_work(out, dt, mass, v_half, dv, moved, force_old, force):
+    """out += the obstacles' work in the step per particle and component, as the
     kick-drift-kick scheme sees it: the kinetic energy m dv (2 v_half + dv) / 2 their
     velocity change dv takes from the mid-step velocity v_half, with the second half kick's
     share dt/2 f_(n+1) . dv, and the work -(f_n + f_(n+1))/2 . moved of the step's forces
@@ -69,15 +77,11 @@ def step_work(c, f_old, f_new, du, out, dt, mass, v_half, dv, moved, force_old, 
     their surfaces (zero where there was no contact); for a particle held at rest on a wall
     it is zero. Each value is rounded as the expressions read, left to right."""
     n, dim = out.shape
-    obstacles = dv.shape[0] > 0
     for i in range(n):
         for a in range(dim):
-            w = c * (f_old[i, a] + f_new[i, a]) * du[i, a]
-            if obstacles:
-                kinetic = 0.5 * mass[i] * dv[i, a] * (2.0 * v_half[i, a] + dv[i, a])
-                w = w + (kinetic + 0.5 * dt * force[i, a] * dv[i, a]
-                         - 0.5 * (force_old[i, a] + force[i, a]) * moved[i, a])
-            out[i, a] = w
+            kinetic = 0.5 * mass[i] * dv[i, a] * (2.0 * v_half[i, a] + dv[i, a])
+            out[i, a] = out[i, a] + (kinetic + 0.5 * dt * force[i, a] * dv[i, a]
+                                     - 0.5 * (force_old[i, a] + force[i, a]) * moved[i, a])
 
 
 class Ledger:
@@ -211,13 +215,11 @@ class Ledger:
         a prescribed motion."""
         n, start = state.n_owned, self._start
         du = state.u[:n] - start["u"]
-        none = np.empty((0, state.dim))  # no obstacles
         for force in (f for f in state.forces if f.work):  # forces without a potential
             now = getattr(state, force.name)
             for b in (b for b in state.bodies if force.absorbs(b.formulation)):
                 work = np.empty((b.hi - b.lo, state.dim))
-                step_work(-0.5, start[force.name][b.lo:b.hi], now[b.lo:b.hi], du[b.lo:b.hi], work, dt, np.empty(0), none,
-                          none, none, none, none)
+                step_work(-0.5, start[force.name][b.lo:b.hi], now[b.lo:b.hi], du[b.lo:b.hi], work)
                 self.totals[force.work][b.index].add(self.part(b, work))
         if state.viscous:
             state.particles.owned("viscous_heat")[:] += 0.5 * dt * (start["heating"] + state.viscous_heating)
@@ -227,9 +229,9 @@ class Ledger:
                          * du)
         self.external = conditions.external_force(state, t)
         work = np.empty_like(du)
-        v_half, dv, moved = start["obstacles"] if start["obstacles"] is not None else (none, none, none)
-        step_work(0.5, start["external"], self.external, du, work, dt, state.mass[:n], v_half, dv, moved,
-                  start["force"], state.force)
+        step_work(0.5, start["external"], self.external, du, work)
+        if start["obstacles"] is not None:
+            add_obstacle_work(work, dt, state.mass[:n], *start["obstacles"], start["force"], state.force)
         self.add("external_work", work)
         if start["v"] is not None:
             v, v_old = state.v[:n], start["v"]
