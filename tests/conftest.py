@@ -198,15 +198,8 @@ def run_parsph():
 def assert_same_on_ranks(scene, args, out_dir, ranks=(1, 3)) -> list:
     """Run `parsph run SCENE ARGS` on each rank count (outputs under out_dir) and assert that
     tools/compare_outputs.py finds every history series and the final state identical;
-    returns the output directories."""
-    outs = []
-    for n in ranks:
-        out = Path(out_dir) / f"ranks_{n}"
-        proc = parsph(["run", scene, "--out", out, "--quiet", *args], ranks=n)
-        assert proc.returncode == 0, proc.stderr
-        outs.append(out)
-    assert_identical_outputs(*outs)
-    return outs
+    returns the output directories (assert_each_same_on_ranks of the one case)."""
+    return assert_each_same_on_ranks([(scene, args, out_dir)], Path(out_dir) / "jobs", ranks)[0]
 
 
 def assert_each_same_on_ranks(cases, folder, ranks=(1, 3)) -> list:
