@@ -41,6 +41,28 @@ class StableStep:
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
         self.bound_hourglass = settings.dt == 0 or (state.updated and topology.adaptive)
 
+    def calibrate(self, state, squared: np.ndarray) -> None:
+        """Set each deformable body's step_factor k so that its part of the estimate at set-up,
+        max_i sqrt(omega_el^2 + omega_hg^2) over its particles (without contact or the
+        motion's limits), equals sqrt(`squared`), the largest frequency of its discrete force
+        operator (operator_frequency.largest_frequencies) on `state` (collective). The
+        estimate is conservative by up to 2 where corrected SPH's operator decouples odd and
+        even particles (1D bars) and where the hourglass bound's triangle inequality is loose;
+        it is optimistic where Hessian stabilisation stiffens more than its power law says:
+        the factor corrects both, and the estimate keeps tracking stretch, stiffening,
+        yielding and contact as the run goes. A body with no stable step (all failed, or
+        flattened) keeps k = 1."""
+        sizes = np.full(len(state.bodies), np.inf)
+        none = np.zeros(0)
+        for b in state.bodies:
+            if not b.rigid:
+                sizes[b.index] = b.formulation.stable_step(state, b, none, none, 1.0)[0]
+        if state.comm.size > 1:
+            state.comm.Allreduce(MPI.IN_PLACE, sizes, op=MPI.MIN)
+        for b in state.bodies:
+            if not b.rigid and 0.0 < sizes[b.index] < math.inf:
+                b.step_factor = 0.5 * math.sqrt(float(squared[b.index])) * float(sizes[b.index])
+
     def next_step(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(size of the next step, each kernel relation's largest incremental log strain):
         time.dt if fixed, else time.cfl times the stable step; the strains for the adaptive
@@ -66,7 +88,8 @@ class StableStep:
             if b.rigid:
                 size, worst, first = rigid.stable_step(b, interactions.omega2, state.step_limit, state.v, interactions.contact)
             else:
-                size, worst, first = b.formulation.stable_step(state, b, interactions.omega2)
+                size, worst, first = b.formulation.stable_step(state, b, interactions.omega2, state.step_limit,
+                                                               b.step_factor)
             if b.moves:  # the strain since a reference that moves
                 strains[b.relation.index] = max(strains[b.relation.index], worst)
             if size < dt or (first >= 0 and not size > 0.0):
