@@ -19,7 +19,10 @@ from mpi4py import MPI
 from parsph import exact_sum
 from parsph.errors import ParsphError
 
-ITERATIONS = 30  # power iterations at set-up (each one evaluation of the bodies' forces)
+ITERATIONS = 30  # power iterations of a measurement (each one evaluation of the bodies' forces)
+# the least steps between measurements at reference updates (simulation.Simulation.step): the
+# iterations then cost at most a tenth of the run's force evaluations
+EVERY = 10 * ITERATIONS
 DELTA = 1.0e-6  # the perturbation's largest displacement, of the body's smallest reference spacing
 SEED = 0x5EED5EED  # of the start vector
 # the iteration is on M^-1 K - sigma I, sigma = SHIFT times the last frequency squared: with
@@ -78,7 +81,7 @@ def largest_frequencies(state, evaluate, iterations: int = ITERATIONS) -> np.nda
             sums = [float(s) for s in exact_sum.allsum(comm, exact_sum.totals(parts))]
             for k, b in enumerate(deformable):
                 vkv, vmv = sums[2 * k], sums[2 * k + 1]
-                squared[b.index] = vkv / vmv if vmv > 0.0 else 0.0
+                squared[b.index] = vkv / vmv if vmv != 0.0 else 0.0  # nan stays nan
             with np.errstate(all="ignore"):  # the next iterate: (M^-1 K - sigma) v
                 v = kv / mass - (SHIFT * squared[state.body[:n]])[:, None] * v
     finally:

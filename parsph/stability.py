@@ -28,6 +28,7 @@ class StableStep:
         self.floor = 0.0  # the smallest stable step allowed (time.step_floor), set by start
         self.cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up
         self.bound_hourglass = True  # whether the stable step is due after each force evaluation
+        self.measured = 0  # the step at which the bodies' step factors were last measured (calibrate)
 
     def start(self, state, topology, interactions, step: int, t: float, clock: dict | None) -> None:
         """The first step's size, or the checkpoint's `clock` (collective); the arguments as
