@@ -318,19 +318,19 @@ class Simulation:
         return dt
 
     def _measure_operator(self) -> None:
-        """The bodies' step factors measured again (stability.StableStep.calibrate), every
-        operator_frequency.EVERY steps: the operator changes with the particles' arrangement
-        and the deformation, faster than the estimate's stretch and stiffening follow (over the
-        bending of the Hessian-stabilised updated cylinder its top frequency rises 1.34 times
-        against the estimate's; a compressed punch's falls to 0.54 of it). The stages are
-        run again at the run's own u, which gives back every array they wrote bit for bit;
-        the interactions' motion limits are kept."""
+        """The bodies' step factors measured again (stability.StableStep.calibrate, which
+        only raises them now), every operator_frequency.EVERY steps: the operator changes with
+        the particles' arrangement and the deformation, and may stiffen faster than the
+        estimate's stretch and stiffening follow (over the bending of the Hessian-stabilised
+        updated cylinder its top frequency rises 1.34 times against the estimate's). The
+        stages are run again at the run's own u, which gives back every array they wrote bit
+        for bit; the interactions' motion limits are kept."""
         state = self.state
         limit = state.step_limit.copy()
         squared = operator_frequency.largest_frequencies(state, self.internal_force)
         self._run_stages(collections.defaultdict(float))
         state.step_limit[:] = limit
-        self.stable.calibrate(state, squared)
+        self.stable.calibrate(state, squared, tighten=True)
         self.stable.measured = self.step_count
 
     def _next_step(self) -> tuple:

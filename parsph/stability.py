@@ -42,7 +42,7 @@ class StableStep:
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
         self.bound_hourglass = settings.dt == 0 or (state.updated and topology.adaptive)
 
-    def calibrate(self, state, squared: np.ndarray) -> None:
+    def calibrate(self, state, squared: np.ndarray, tighten: bool = False) -> None:
         """Set each deformable body's step_factor k so that its part of the estimate at set-up,
         max_i sqrt(omega_el^2 + omega_hg^2) over its particles (without contact or the
         motion's limits), equals sqrt(`squared`), the largest frequency of its discrete force
@@ -52,7 +52,11 @@ class StableStep:
         it is optimistic where Hessian stabilisation stiffens more than its power law says:
         the factor corrects both, and the estimate keeps tracking stretch, stiffening,
         yielding and contact as the run goes. A body with no stable step (all failed, or
-        flattened) keeps k = 1."""
+        flattened) keeps its k. With `tighten` (a measurement during the run) k only grows:
+        a deformed state's operator may be stiffer than the estimate follows (the
+        Hessian-stabilised updated cylinder's), but a softer one is not taken up, as the
+        operator knows nothing of the contact and disorder of a compressed body (the updated
+        punch, given the larger step, pairs up its particles under the tool)."""
         sizes = np.full(len(state.bodies), np.inf)
         none = np.zeros(0)
         for b in state.bodies:
@@ -62,7 +66,8 @@ class StableStep:
             state.comm.Allreduce(MPI.IN_PLACE, sizes, op=MPI.MIN)
         for b in state.bodies:
             if not b.rigid and 0.0 < sizes[b.index] < math.inf:
-                b.step_factor = 0.5 * math.sqrt(float(squared[b.index])) * float(sizes[b.index])
+                factor = 0.5 * math.sqrt(float(squared[b.index])) * float(sizes[b.index])
+                b.step_factor = max(factor, b.step_factor) if tighten else factor
 
     def next_step(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(size of the next step, each kernel relation's largest incremental log strain):
