@@ -85,13 +85,13 @@ class Simulation:
         if self.interactions.contact is not None and restart is None:
             self.interactions.contact.check_apart(state.gid, state.body, state.X[:n] + state.u[:n],
                                                   [b.name for b in bodies])
-        factors = restart["clock"].get("step_factors") if restart else None
-        if factors is None:  # the bodies' largest frequencies, before the forces at the run's own u
-            start = time.perf_counter()
-            squared = operator_frequency.largest_frequencies(state, self.internal_force)
         self.compute_forces()
+        factors = restart["clock"].get("step_factors") if restart else None
         if factors is None:
-            self.stable.calibrate(state, squared)
+            # a flattened particle stops the run here, named, before the measurement perturbs it
+            self.stable.limit(state, self.topology, self.interactions, self.step_count, self.t)
+            start = time.perf_counter()
+            self._measure_operator(tighten=False)
             self.stage_seconds["step operator"] += time.perf_counter() - start
         else:
             for b, factor in zip(bodies, factors):
@@ -317,11 +317,11 @@ class Simulation:
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
 
-    def _measure_operator(self) -> None:
-        """The bodies' step factors measured again (stability.StableStep.calibrate, which
-        only raises them now), every operator_frequency.EVERY steps: the operator changes with
-        the particles' arrangement and the deformation, and may stiffen faster than the
-        estimate's stretch and stiffening follow (over the bending of the Hessian-stabilised
+    def _measure_operator(self, tighten: bool = True) -> None:
+        """The bodies' step factors measured (stability.StableStep.calibrate) at set-up, and
+        again every operator_frequency.EVERY steps, where they only rise (`tighten`): the
+        operator changes with the particles' arrangement and the deformation, and may stiffen
+        faster than the estimate's stretch and stiffening follow (over the bending of the Hessian-stabilised
         updated cylinder its top frequency rises 1.34 times against the estimate's). The
         stages are run again at the run's own u, which gives back every array they wrote bit
         for bit; the interactions' motion limits are kept."""
@@ -330,7 +330,7 @@ class Simulation:
         squared = operator_frequency.largest_frequencies(state, self.internal_force)
         self._run_stages(collections.defaultdict(float))
         state.step_limit[:] = limit
-        self.stable.calibrate(state, squared, tighten=True)
+        self.stable.calibrate(state, squared, tighten)
         self.stable.measured = self.step_count
 
     def _next_step(self) -> tuple:
