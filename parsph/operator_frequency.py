@@ -20,7 +20,7 @@ from parsph import exact_sum
 from parsph.errors import ParsphError
 
 ITERATIONS = 30  # power iterations of a measurement (each one evaluation of the bodies' forces)
-# the least steps between measurements at reference updates (simulation.Simulation.step): the
+# the least steps between measurements where a reference moves (simulation.Simulation.step): the
 # iterations then cost at most a tenth of the run's force evaluations
 EVERY = 10 * ITERATIONS
 DELTA = 1.0e-6  # the perturbation's largest displacement, of the body's smallest reference spacing
