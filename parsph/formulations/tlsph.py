@@ -492,7 +492,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     owned particles lo..hi-1:
         dt_i = 2 / sqrt(k^2 (omega_el^2 + omega_hg^2) + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
     k (`scale`) the body's factor that makes the body's own part match the largest frequency
-    of its discrete force operator at set-up (parsph.operator_frequency, stability.StableStep.calibrate),
+    of its discrete force operator when measured (parsph.operator_frequency, stability.StableStep.calibrate),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
     the motion from the reference fs (the current spacing shrinks with it), and c_i the
     reference P-wave speed times the square root of the law's stiffening under the total F
