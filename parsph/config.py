@@ -90,7 +90,7 @@ SECTIONS: dict[str, dict[str, Key]] = {
     "time": {
         "end": Key("float", REQUIRED, positive, "end time [s]"),
         "dt": Key("float", 0.0, non_negative, "fixed time step [s]; 0 = from the CFL condition"),
-        "cfl": Key("float", 0.6, in_range(0.0, 1.0, True), "safety factor of the CFL time step"),
+        "cfl": Key("float", 0.85, in_range(0.0, 1.0, True), "safety factor of the CFL time step"),
         "damping": Key("float", 0.0, non_negative, "mass-proportional damping rate [1/s]"),
         "max_steps": Key("int", 0, non_negative, "stop after this many steps (0 = no limit)"),
         "step_floor": Key("float", 1e-6, in_range(0.0, 1.0, False, True),

@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from parsph import readouts
+from parsph import operator_frequency, readouts
 from parsph.bc import apply_initial_conditions
 from parsph.conditions import Conditions
 from parsph.diagnostics import history_row
@@ -86,6 +86,17 @@ class Simulation:
             self.interactions.contact.check_apart(state.gid, state.body, state.X[:n] + state.u[:n],
                                                   [b.name for b in bodies])
         self.compute_forces()
+        factors = restart["clock"].get("step_factors") if restart else None
+        if factors is None:
+            # a flattened particle stops the run here, named, before the measurement perturbs it
+            self.stable.limit(state, self.topology, self.interactions, self.step_count, self.t)
+            start = time.perf_counter()
+            self._measure_operator(tighten=False)
+            self.stage_seconds["step operator"] += time.perf_counter() - start
+        else:
+            for b, factor in zip(bodies, factors):
+                b.step_factor = factor
+            self.stable.measured = restart["clock"].get("measured_step", 0)
         self.ledger.external = self.conditions.external_force(state, self.t)  # for the work integral
         self.stable.start(state, self.topology, self.interactions, self.step_count, self.t,
                           restart["clock"] if restart else None)
@@ -145,41 +156,10 @@ class Simulation:
         n = state.n_owned
         clock = time.perf_counter
         seconds = self.stage_seconds
-        stale = {"d", "v"}  # moved by the integrator (v is refreshed only if a stage reads it)
-        state.step_limit.fill(np.inf)
-        phases = max(len(b.stages) for b in state.bodies)
-        k = 0
-        while k < phases:
-            phase = [b.stages[k] for b in state.bodies if k < len(b.stages)]
-            if move_reference and any(stage.force_row for stage in phase):
-                move_reference = False
-                if self._move_reference([r for r in self.topology.relations if r.eulerian]):
-                    self.compute_forces()  # searched: new arrays, the whole evaluation in the new reference
-                    return
-                continue  # the same phase, with the stages of the new reference
-            reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
-            if reads:
-                t0 = clock()
-                state.refresh(reads)
-                stale.difference_update(reads)
-                seconds["halo"] += clock() - t0
-            for stage in phase:
-                t0 = clock()
-                try:
-                    stage.run()
-                except ArithmeticError as exc:  # compiled code divided by zero: the state broke down
-                    raise ParsphError(f"the {stage.name} stage failed ({exc}) at step {self.step_count + 1}, "
-                                      f"t = {self.t:.6g}: particles coincide or are inverted; the run is "
-                                      f"unstable: {self.stable.advice()}") from None
-                seconds[stage.name] += clock() - t0
-                stale.update(stage.writes)
-            k += 1
-        internal = None
-        for force in state.forces:  # state.FORCES
-            if internal is None:
-                internal = getattr(state, force.name).copy()
-            else:
-                internal += getattr(state, force.name)
+        stale = self._run_stages(seconds, move_reference)
+        if stale is None:  # searched: the whole evaluation was made in the new reference
+            return
+        internal = self._bodies_force()
         for interaction in self.interactions:  # parsph.interactions
             t0 = clock()
             reads = [name for name in interaction.reads if name in stale]
@@ -204,6 +184,62 @@ class Simulation:
             self.conditions.add_loads(state, force, self.t)
         state.force = force
         state.acc = force / state.mass[:n, None]
+
+    def _run_stages(self, seconds: dict, move_reference: bool = False) -> set | None:
+        """The bodies' stages at the current u, phase by phase (as compute_forces), their
+        wall times added to `seconds`; returns the fields written whose ghost values are
+        stale, or None if an Eulerian move searched and compute_forces was run anew."""
+        state = self.state
+        clock = time.perf_counter
+        stale = {"d", "v"}  # moved by the integrator (v is refreshed only if a stage reads it)
+        state.step_limit.fill(np.inf)
+        phases = max(len(b.stages) for b in state.bodies)
+        k = 0
+        while k < phases:
+            phase = [b.stages[k] for b in state.bodies if k < len(b.stages)]
+            if move_reference and any(stage.force_row for stage in phase):
+                move_reference = False
+                if self._move_reference([r for r in self.topology.relations if r.eulerian]):
+                    self.compute_forces()  # searched: new arrays, the whole evaluation in the new reference
+                    return None
+                continue  # the same phase, with the stages of the new reference
+            reads = [name for name in dict.fromkeys(r for stage in phase for r in stage.reads) if name in stale]
+            if reads:
+                t0 = clock()
+                state.refresh(reads)
+                stale.difference_update(reads)
+                seconds["halo"] += clock() - t0
+            for stage in phase:
+                t0 = clock()
+                try:
+                    stage.run()
+                except ArithmeticError as exc:  # compiled code divided by zero: the state broke down
+                    raise ParsphError(f"the {stage.name} stage failed ({exc}) at step {self.step_count + 1}, "
+                                      f"t = {self.t:.6g}: particles coincide or are inverted; the run is "
+                                      f"unstable: {self.stable.advice()}") from None
+                seconds[stage.name] += clock() - t0
+                stale.update(stage.writes)
+            k += 1
+        return stale
+
+    def internal_force(self) -> np.ndarray:
+        """The bodies' internal force (their stages' forces, state.FORCES) on the owned rows at
+        the current u: no interactions, obstacles or loads. It writes the arrays the stages
+        write (F, stress, trial states) as an evaluation at this u does; the state stays
+        consistent once compute_forces has run at the run's own u."""
+        self._run_stages(collections.defaultdict(float))
+        return self._bodies_force()
+
+    def _bodies_force(self) -> np.ndarray:
+        """The sum of the force arrays the bodies' stages wrote (state.FORCES, in order), a new array."""
+        state = self.state
+        internal = None
+        for force in state.forces:  # state.FORCES
+            if internal is None:
+                internal = getattr(state, force.name).copy()
+            else:
+                internal += getattr(state, force.name)
+        return internal
 
     def _kick(self, dt: float) -> None:
         state = self.state
@@ -267,10 +303,38 @@ class Simulation:
             due = self.topology.due(strains)
         if due:
             self.update_reference(due)
+        # the step factors measured again where a reference moves between steps (not with a
+        # fixed time.dt, nor an Eulerian kernel's, which moves inside the force evaluation)
+        measure = (state.updated and not state.eulerian and self.scene.time.dt == 0
+                   and self.step_count - self.stable.measured >= operator_frequency.EVERY)
+        if measure:
+            clock = time.perf_counter()
+            self._measure_operator()
+            self.stage_seconds["step operator"] += time.perf_counter() - clock
+        if due or measure:
             clock = time.perf_counter()
             self.stable.dt = self._next_step()[0]
             self.stage_seconds["stable step"] += time.perf_counter() - clock
         return dt
+
+    def _measure_operator(self, tighten: bool = True) -> None:
+        """The bodies' step factors measured (stability.StableStep.calibrate) at set-up, and,
+        where a reference moves, again every operator_frequency.EVERY steps, where they only
+        rise (`tighten`): the updated operator changes with the particles' arrangement in
+        each new reference and may stiffen faster than the estimate's stretch and stiffening
+        follow (over the bending of the Hessian-stabilised updated cylinder its top frequency
+        rises 1.34 times against the estimate's). A total-Lagrangian operator changes with
+        the deformation alone, which the estimate follows, conservatively where it was seen
+        (the compressed punch's top frequency falls to 0.54 of the estimate's, the rubber
+        ring's to 0.45). The stages are run again at the run's own u, which gives back every
+        array they wrote bit for bit; the interactions' motion limits are kept."""
+        state = self.state
+        limit = state.step_limit.copy()
+        squared = operator_frequency.largest_frequencies(state, self.internal_force)
+        self._run_stages(collections.defaultdict(float))
+        state.step_limit[:] = limit
+        self.stable.calibrate(state, squared, tighten)
+        self.stable.measured = self.step_count
 
     def _next_step(self) -> tuple:
         """The next step's size and the relations' strains (stability.StableStep.next_step)."""

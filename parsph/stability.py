@@ -28,6 +28,7 @@ class StableStep:
         self.floor = 0.0  # the smallest stable step allowed (time.step_floor), set by start
         self.cfl_at = None  # with a fixed time.dt: (CFL step, step) at set-up
         self.bound_hourglass = True  # whether the stable step is due after each force evaluation
+        self.measured = 0  # the step at which the bodies' step factors were last measured (calibrate)
 
     def start(self, state, topology, interactions, step: int, t: float, clock: dict | None) -> None:
         """The first step's size, or the checkpoint's `clock` (collective); the arguments as
@@ -40,6 +41,33 @@ class StableStep:
         self.floor = settings.step_floor * self.first if self.first < math.inf else 0.0
         # a fixed time.dt needs no stable step after the set-up (unless for the adaptive update's strain)
         self.bound_hourglass = settings.dt == 0 or (state.updated and topology.adaptive)
+
+    def calibrate(self, state, squared: np.ndarray, tighten: bool = False) -> None:
+        """Set each deformable body's step_factor k so that its part of the estimate at set-up,
+        max_i sqrt(omega_el^2 + omega_hg^2) over its particles (without contact or the
+        motion's limits), equals sqrt(`squared`), the largest frequency of its discrete force
+        operator (operator_frequency.largest_frequencies) on `state` (collective). The
+        estimate is conservative by up to 2 where corrected SPH's operator decouples odd and
+        even particles (1D bars) and where the hourglass bound's triangle inequality is loose;
+        it is optimistic where Hessian stabilisation stiffens more than its power law says:
+        the factor corrects both, and the estimate keeps tracking stretch, stiffening,
+        yielding and contact as the run goes. A body with no stable step (all failed, or
+        flattened) keeps its k. With `tighten` (a measurement during the run) k only grows:
+        a deformed state's operator may be stiffer than the estimate follows (the
+        Hessian-stabilised updated cylinder's), but a softer one is not taken up, as the
+        operator knows nothing of the contact and disorder of a compressed body (the updated
+        punch, given the larger step, pairs up its particles under the tool)."""
+        sizes = np.full(len(state.bodies), np.inf)
+        none = np.zeros(0)
+        for b in state.bodies:
+            if not b.rigid:
+                sizes[b.index] = b.formulation.stable_step(state, b, none, none, 1.0)[0]
+        if state.comm.size > 1:
+            state.comm.Allreduce(MPI.IN_PLACE, sizes, op=MPI.MIN)
+        for b in state.bodies:
+            if not b.rigid and 0.0 < sizes[b.index] < math.inf:
+                factor = 0.5 * math.sqrt(float(squared[b.index])) * float(sizes[b.index])
+                b.step_factor = max(factor, b.step_factor) if tighten else factor
 
     def next_step(self, state, topology, interactions, step: int, t: float) -> tuple:
         """(size of the next step, each kernel relation's largest incremental log strain):
@@ -66,7 +94,8 @@ class StableStep:
             if b.rigid:
                 size, worst, first = rigid.stable_step(b, interactions.omega2, state.step_limit, state.v, interactions.contact)
             else:
-                size, worst, first = b.formulation.stable_step(state, b, interactions.omega2)
+                size, worst, first = b.formulation.stable_step(state, b, interactions.omega2, state.step_limit,
+                                                               b.step_factor)
             if b.moves:  # the strain since a reference that moves
                 strains[b.relation.index] = max(strains[b.relation.index], worst)
             if size < dt or (first >= 0 and not size > 0.0):

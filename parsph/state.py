@@ -45,6 +45,8 @@ class Body:
         self.moves = self.formulation.updated and not self.rigid  # its reference moves (updated, Eulerian)
         self.lo = self.hi = 0
         self.set_rows = {}  # its owned rows of each other point set (stress points, Gauss points)
+        # the factor on its own frequencies in the stable step (stability.StableStep.calibrate)
+        self.step_factor = 1.0
         self.relation = None  # its kernel relation (kernel_relation.KernelRelation), set by the topology
         self.stages = []
 

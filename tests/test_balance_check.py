@@ -205,7 +205,7 @@ def test_bars_at_hypervelocity_stop_instead_of_standing_still(tmp_path, ranks):
 def flyer(*overrides) -> tuple:
     """runs/flyer_plate.toml to 2 us: (shock speed from the front's positions, u_p, J and
     -sigma_xx behind it, the internal energy per reference volume there, history)."""
-    sim = simulation("flyer_plate", list(overrides))
+    sim = simulation("flyer_plate", ["time.cfl=0.3", *overrides])
     rows = []
 
     def probe(s):
@@ -268,7 +268,7 @@ def test_machdyn_viscous_hourglass_dampers_do_not_feed_energy_into_a_coarse_rod(
     its dampers, stiffer than the material on so coarse a rod, were integrated past their
     stability limit and the total energy rose by 22 %; bounded in the stable step by their
     damping rate, the balance closes to 1 % (measured 3e-3)."""
-    sim = simulation("taylor_jc", ["parameters.layers=12", "formulation.plastic_hourglass=viscous"])
+    sim = simulation("taylor_jc", ["parameters.layers=12", "formulation.plastic_hourglass=viscous", "time.cfl=0.3"])
     h = run_until(sim, 8e-5, every=100)
     assert np.abs(h["total_energy"] - h["total_energy"][0]).max() < 1e-2 * h["kinetic_energy"][0]
     assert h["hourglass_energy"][-1] > 0.0  # the dampers' work, absorbed

@@ -209,7 +209,7 @@ BAR_PERIOD = 4.0 / BAR_C
 def bar(ftype: str, periods: float = 2.0, extra=()):
     """runs/bar1d.toml with [R]'s kernel (and `extra` overrides): times, tip displacement
     (every step), total energy (every 10 steps)."""
-    sim = simulation("bar1d", [f'formulation.type="{ftype}"', "kernel.support=2.0", *extra])
+    sim = simulation("bar1d", [f'formulation.type="{ftype}"', "kernel.support=2.0", "time.cfl=0.3", *extra])
     tip = sim.group_index("B")[0]
     end = periods * BAR_PERIOD
     t, u, energy = [0.0], [0.0], [sim.diagnostics()["total_energy"]]
@@ -263,7 +263,7 @@ def test_bar1d_rlm_follows_the_analytic_bar_sph_conserves_energy_with_a_soft_fre
 def beam(ftype: str, overrides=()):
     """runs/beam_bending.toml, n = 4 (140 particles), [R]'s kernel, no hourglass control."""
     return simulation("beam_bending", [f'formulation.type="{ftype}"', *KERNEL, "formulation.hourglass=0",
-                                       "parameters.n=4", *overrides])
+                                       "parameters.n=4", "time.cfl=0.3", *overrides])
 
 
 def test_beam_bending_undamped_sph_balances_energy_rlm_does_not():
@@ -393,7 +393,8 @@ def test_eulerian_kernel_sph_and_rlm_clump_in_tension_efg_and_the_lagrangian_do_
     0.158, rlm 0.984 / 0.549, kbm 0.992 / 0.992, efg 0.978 / 0.969."""
     smallest = {}
     for kernel in ("lagrangian", "eulerian"):
-        sim = simulation("plate_tension", [f'formulation.type="{ftype}"', f'formulation.kernel="{kernel}"'])
+        sim = simulation("plate_tension", [f'formulation.type="{ftype}"', f'formulation.kernel="{kernel}"',
+                                           "time.cfl=0.3"])
         rows = run_until(sim, 0.012, every=10)
         smallest[kernel] = rows["spacing_min"].min()
         if kernel == "eulerian":  # the shape functions rebuilt at every step, the neighbours searched for

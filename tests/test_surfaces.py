@@ -177,7 +177,7 @@ def test_a_turning_surface_does_its_torque_times_angular_velocity_as_work(tmp_pa
     bar = tmp_path / "bar.csv"
     np.savetxt(bar, [[0.0, 0.55], [1.2, 0.55], [1.2, 0.59], [0.0, 0.59]], delimiter=",")
     sim = simulation(ROTOR + surface(bar, 'center = [0.0, 0.57]\n'
-                                     'angular_velocity_expression = ["-2 * minimum(t / 0.02, 1.0)"]'))
+                                     'angular_velocity_expression = ["-2 * minimum(t / 0.02, 1.0)"]'), ["time.cfl=0.3"])
     h, work = step_with_impulses(sim, 0.06, lambda s, row: -2.0 * min(s.t / 0.02, 1.0) * row["surface0_torque_z"])
     torque = h["surface0_torque_z"]
     assert torque.min() < -1e4 and torque.max() <= 0.0

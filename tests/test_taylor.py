@@ -20,7 +20,7 @@ END = 8e-6
 
 def impact(*overrides) -> tuple:
     """(diagnostics at t = 0, at END, the simulation) of the base-resolution bar."""
-    sim = simulation("taylor_impact", [f"time.end={END}", *overrides])
+    sim = simulation("taylor_impact", [f"time.end={END}", "time.cfl=0.3", *overrides])
     start = global_diagnostics(sim)
     while sim.t < END:
         sim.step(END)

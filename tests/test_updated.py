@@ -79,7 +79,7 @@ def acceleration_jump_at_update(correction):
     step after the last update, over the largest acceleration (the punch updated every 3
     steps with eta = 1.4, coarse, at 8 % compression)."""
     sim = simulation("punch_hessian", UL + ["formulation.update_every=3", "parameters.spacing=1e-3",
-                                            f"formulation.hessian_correction={correction}"])
+                                            f"formulation.hessian_correction={correction}", "time.cfl=0.3"])
     run_until(sim, 0.8e-3)
     sim.topology.relations[0].every = 10**9  # updates by hand from here
     sim.update_reference()
@@ -178,7 +178,7 @@ def test_spinning_body_with_updates_keeps_its_angular_momentum():
 type = "angular_velocity"
 omega = [20.0]
 center = [0.5, 0.3]
-""", UL + ["formulation.update_every=2", "formulation.hessian=1.0"])
+""", UL + ["formulation.update_every=2", "formulation.hessian=1.0", "time.cfl=0.3"])
     rows = run_until(sim, 0.2, every=50)
     assert sim.topology.count > 100
     L = rows["angular_momentum"]
@@ -195,16 +195,17 @@ def bar_tip(overrides, end=3.2e-3):
 
 
 def test_bar_unstabilised_updates_spoil_the_solution_and_hessian_stabilisation_restores_it():
-    """[V §3.3.1, Fig. 11-12, 15]: updates every 3 steps, no artificial viscosity."""
-    tl, _ = bar_tip([])
+    """[V §3.3.1, Fig. 11-12, 15]: updates every 3 steps, no artificial viscosity; at time.cfl
+    0.3 (the odd-even mode needs many updates to grow)."""
+    tl, _ = bar_tip(["time.cfl=0.3"])
     scale = np.linalg.norm(tl["probe"])
 
     def distance(rows):
         return np.linalg.norm(np.interp(tl["time"], rows["time"], rows["probe"]) - tl["probe"]) / scale
 
-    plain, sim = bar_tip(UL + ["formulation.update_every=3"])
+    plain, sim = bar_tip(UL + ["formulation.update_every=3", "time.cfl=0.3"])
     assert sim.topology.count >= sim.step_count // 3 > 300
-    stabilised, _ = bar_tip(UL + ["formulation.update_every=3", "formulation.hessian=0.3"])
+    stabilised, _ = bar_tip(UL + ["formulation.update_every=3", "formulation.hessian=0.3", "time.cfl=0.3"])
     assert distance(plain) > 0.15  # measured 0.20: the odd-even mode grows
     assert distance(stabilised) < 0.04  # measured 0.024
     e = stabilised["total_energy"]
@@ -276,7 +277,9 @@ def test_cylinder_with_updates_every_3_steps_or_adaptive_tracks_total_lagrangian
     """[V §4.1, Fig. 17] on a coarser cylinder (5 particles across) through its first swing
     (0.8 s): updated every 3 steps with eta = 1.5, the largest x-displacement history follows
     the total-Lagrangian run with the same stabilisation (measured 1.8 % L2); the adaptive
-    trigger gets the same answer (0.4 %) with far fewer updates (42 against 976)."""
+    trigger gets the same answer (0.4 %) with far fewer updates (41 against 329 at the
+    default step; 42 against 976 at the step of time.cfl 0.6 before the step followed the
+    force operator)."""
     (tl, _), (every3, sim3), (adaptive, sim_a) = runs_of(
         "cylinder_bending_ul", ["geometry.parts.0.spacing=0.128", "time.end=0.8"], 0.8, 10,
         TL, [], ["formulation.update_every=0", "formulation.update_strain=0.05"])
@@ -289,7 +292,7 @@ def test_cylinder_with_updates_every_3_steps_or_adaptive_tracks_total_lagrangian
     assert tl["max_displacement_x"].max() > 1.5  # it really swings
     assert distance(every3, tl) < 0.05
     assert distance(adaptive, every3) < 0.01
-    assert sim_a.topology.count * 10 < sim3.topology.count
+    assert sim_a.topology.count * 5 < sim3.topology.count
     for rows in (every3, adaptive):
         e = rows["total_energy"]
         assert np.abs(e - e[0]).max() < 2e-3 * e[0]
@@ -298,7 +301,8 @@ def test_cylinder_with_updates_every_3_steps_or_adaptive_tracks_total_lagrangian
 def test_ring_bounces_off_the_symmetry_plane_like_total_lagrangian():
     """[V §4.2, Fig. 20]: updated every 3 steps with eta = 0.3, the ring's vertical bulge
     follows the total-Lagrangian run and no particle separates."""
-    (tl, _), (ul, sim) = runs_of("rings", ["parameters.spacing=4e-3", "time.end=0.03"], 0.03, 20, TL, [])
+    (tl, _), (ul, sim) = runs_of("rings", ["parameters.spacing=4e-3", "time.end=0.03", "time.cfl=0.3"], 0.03, 20,
+                                 TL, [])
     assert sim.topology.count > 300
     bulge_tl = tl["top_y"] - tl["top_y"][0]
     bulge_ul = np.interp(tl["time"], ul["time"], ul["top_y"]) - tl["top_y"][0]

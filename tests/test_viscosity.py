@@ -70,7 +70,7 @@ viscosity = 0.5
 viscosity_beta = 1.0
 [time]
 end = 2.0e-3
-cfl = 0.3  # leapfrog's own error, O(dt^2), is 5e-3 at the default step
+cfl = 0.15  # leapfrog's own error, O(dt^2), is 5e-3 at the step of cfl 0.3 of the plain estimate
 [[initial]]
 type = "velocity_field"
 expression = ["-20 * x", "-20 * y"]

@@ -5,7 +5,9 @@ For each scene of runs/ (SCENES: the overrides that keep a run to seconds): a re
 at a small step (time.cfl = REFERENCE_CFL times the stable-step estimate) over STEPS of its
 first steps (at most to the scene's end); then the scene's default step (its own time.cfl)
 over the same simulated time, and runs with a fixed `time.dt`, the step doubled from the
-reference's until a run fails the test, then bisected to 5 %. Two tests, each with its own
+reference's until a run fails the test, then bisected to 5 %. The default run's step may fall
+as the scene stiffens (compression, contact): its smallest step over the window is listed
+beside its first. Two tests, each with its own
 largest step:
   stable:   the run ends without an error and its energy balance, max |total - initial|
             over the run, stays below 0.1 of its largest kinetic + strain energy or 3 times
@@ -15,7 +17,8 @@ largest step:
             reference run: the same answer within the method's error.
 The walls' and tools' forces are left out: they are the impulse of one step over its length.
 
-usage: tools/stable_step.py [--scenes NAME ...] [--steps 2000]
+usage: tools/stable_step.py [--scenes NAME ...] [--steps 2000] [--set KEY=VALUE ...]
+(--set: overrides of every run of every scene, after the scene's own, e.g. time.cfl=0.8)
 """
 
 from __future__ import annotations
@@ -77,17 +80,19 @@ def probes(row: dict) -> dict:
 
 
 def verdict(name, overrides, end, dt, reference) -> tuple:
-    """(stable, accurate) at the fixed step dt."""
+    """(stable, accurate, the smallest step taken) at the fixed step dt, or the default one
+    (dt None)."""
     final_ref, series_ref, balance_ref = reference
     try:
-        final, _, balance = run(name, overrides, end, dt)
+        final, series, balance = run(name, overrides, end, dt)
     except ParsphError:
-        return False, False
+        return False, False, math.nan
+    smallest = float(np.min(series["dt"]))
     if not balance <= max(BLOW_UP, 3.0 * balance_ref):
-        return False, False
+        return False, False, smallest
     close = all(abs(final[k] - v) <= PROBE_TOLERANCE * max(np.ptp(series_ref[k]), 1e-12 * abs(v))
                 for k, v in probes(final_ref).items())
-    return True, close and balance <= max(3.0 * balance_ref, 1e-3)
+    return True, close and balance <= max(3.0 * balance_ref, 1e-3), smallest
 
 
 def largest(test, chosen: float) -> tuple:
@@ -113,7 +118,7 @@ def measure(name: str, overrides: list, steps: int) -> dict:
     start = time.perf_counter()
     sim = simulation(name, overrides)
     chosen = float(sim.diagnostics()["dt"])
-    small = overrides + [f"time.cfl={REFERENCE_CFL}"]
+    small = overrides + [f"time.cfl={min(REFERENCE_CFL, sim.scene.time.cfl)}"]  # a scene's own smaller cfl
     first = float(simulation(name, small).diagnostics()["dt"])
     end = min(steps * first, sim.scene.time.end)
     reference = run(name, small, end, None)
@@ -127,7 +132,8 @@ def measure(name: str, overrides: list, steps: int) -> dict:
 
     stable = largest(lambda dt: judged(dt)[0], first)
     accurate = largest(lambda dt: judged(dt)[1], first)
-    return {"chosen": chosen, "default": default, "stable": stable, "accurate": accurate, "balance": reference[2],
+    return {"chosen": chosen, "default": default[:2], "smallest": default[2], "stable": stable, "accurate": accurate,
+            "balance": reference[2],
             "runs": len(cache) + 2, "seconds": time.perf_counter() - start}
 
 
@@ -135,18 +141,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=list(SCENES))
     parser.add_argument("--steps", type=int, default=2000, help="steps of the reference run")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="an override of every run (after the scene's own), e.g. time.cfl=0.8")
     args = parser.parse_args()
-    print(f"| scene | default step [s] | default run | largest stable | ratio | largest accurate | ratio | "
-          f"balance at cfl {REFERENCE_CFL} | runs | wall [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print(f"| scene | default step [s] | default run | smallest default step | largest stable | ratio | "
+          f"largest accurate | ratio | stable / smallest | balance at cfl {REFERENCE_CFL} | runs | wall [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
-        r = measure(name, SCENES.get(name, []), args.steps)
+        r = measure(name, SCENES.get(name, []) + args.set, args.steps)
         cells = []
         for limit, capped in (r["stable"], r["accurate"]):
             cells += [f"{'> ' if capped else ''}{limit:.3g}", f"{limit / r['chosen']:.2f}"]
         fares = {(True, True): "accurate", (True, False): "stable", (False, False): "UNSTABLE"}[r["default"]]
-        print(f"| {name} | {r['chosen']:.3g} | {fares} | {' | '.join(cells)} | {r['balance']:.1e} | {r['runs']} | "
-              f"{r['seconds']:.0f} |", flush=True)
+        print(f"| {name} | {r['chosen']:.3g} | {fares} | {r['smallest']:.3g} | {' | '.join(cells)} | "
+              f"{r['stable'][0] / r['smallest']:.2f} | {r['balance']:.1e} | {r['runs']} | {r['seconds']:.0f} |",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -127,17 +127,18 @@ class Formulation(ABC):
         """w_q q_q over the body's owned integration points, q = density(arrays) per row of a
         point set's arrays (a density per unit reference volume: psi, plastic work)."""
 
-    def stable_step(self, state, body, omega2: np.ndarray) -> tuple:
+    def stable_step(self, state, body, omega2: np.ndarray, step_limit: np.ndarray, scale: float) -> tuple:
         """(stable step, largest incremental log strain, the row that sets the step or -1)
-        over the body's owned particles, with its hourglass springs (none: HOURGLASS_OFF) and
-        the interactions' springs' squared frequencies `omega2`
+        over the body's owned particles, with its hourglass springs (none: HOURGLASS_OFF), the
+        interactions' springs' squared frequencies `omega2` and the motion's `step_limit`
+        (each empty: none), the body's own frequencies times `scale`
         (formulations.tlsph.stable_time_step)."""
         from parsph.formulations import tlsph  # which imports this module
         ref = body.relation.ref
         return tlsph.stable_time_step(
             body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
             ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
-            state.broken, state.omega_hg2, self.hourglass_form, omega2, state.step_limit, state.scratch33)
+            state.broken, state.omega_hg2, self.hourglass_form, omega2, step_limit, scale, state.scratch33)
 
 
 class Running:

@@ -498,10 +498,12 @@ def spring_terms(k, x0, x1, x2, t0, t1, t2, t3, t4, t5):
 
 @njit(cache=True, _nrt=False)
 def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass,
-                     omega_c2, step_limit, C):
+                     omega_c2, step_limit, scale, C):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
-        dt_i = 2 / sqrt(omega_el^2 + omega_hg^2 + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
+        dt_i = 2 / sqrt(k^2 (omega_el^2 + omega_hg^2) + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
+    k (`scale`) the body's factor that makes the body's own part match the largest frequency
+    of its discrete force operator when measured (parsph.operator_frequency, stability.StableStep.calibrate),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
     the motion from the reference fs (the current spacing shrinks with it), and c_i the
     reference P-wave speed times the square root of the law's stiffening under the total F
@@ -539,7 +541,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
             return 0.0, np.inf, i  # no stable step
         worst = max(worst, math.log(f_max), -math.log(f_min))
         w_el = 2.0 * wave_speed * math.sqrt(stiffening) * stab[i] ** 0.75 / length
-        w2 = w_el * w_el + (omega_hg2[i] if hourglass != HOURGLASS_OFF else 0.0)
+        w2 = scale * scale * (w_el * w_el + (omega_hg2[i] if hourglass != HOURGLASS_OFF else 0.0))
         if len(omega_c2):
             w2 += omega_c2[i]
         dt_i = 2.0 / math.sqrt(w2)

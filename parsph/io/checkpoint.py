@@ -124,7 +124,8 @@ def state_of(sim) -> dict:
                    "surface_torque": readouts.surface_torques(sim).tolist(),
                    "rigid": [body.state() for body in sim.conditions.rigid_bodies], **sim.interactions.checkpoint()},
         "clock": {"t": sim.t, "step": sim.step_count, "dt": sim.dt, "step_dt": sim.step_dt,
-                  **sim.topology.clock(), "first_stable": sim.stable.first},
+                  **sim.topology.clock(), "first_stable": sim.stable.first,
+                  "step_factors": [b.step_factor for b in sim.state.bodies], "measured_step": sim.stable.measured},
     }
 
 
