@@ -89,11 +89,11 @@ def largest_frequencies(state, evaluate, iterations: int = ITERATIONS) -> np.nda
     for b in deformable:
         if not np.isfinite(squared[b.index]):
             error = ParsphError(f"body '{b.name}': its internal force is not finite at a small change of its "
-                                f"displacement at set-up (the largest frequency of its force operator is "
+                                f"displacement (the largest frequency of its force operator is "
                                 f"{squared[b.index]}): check its material constants and particles")
         elif not squared[b.index] > 0.0:
-            error = ParsphError(f"body '{b.name}': its internal force does not grow with its displacement at "
-                                f"set-up (its force operator is singular: the largest frequency squared is "
+            error = ParsphError(f"body '{b.name}': its internal force does not grow with its displacement "
+                                f"(its force operator is singular: the largest frequency squared is "
                                 f"{squared[b.index]:.3g} 1/s^2); its particles have no stiffness or no "
                                 f"neighbours: check its material constants, particle spacing and kernel support")
         else:
