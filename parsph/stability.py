@@ -61,7 +61,7 @@ class StableStep:
         none = np.zeros(0)
         for b in state.bodies:
             if not b.rigid:
-                sizes[b.index] = b.formulation.stable_step(state, b, none, none, 1.0)[0]
+                sizes[b.index] = b.formulation.stable_step(state, b, none, none, 1.0, dampers=False)[0]
         if state.comm.size > 1:
             state.comm.Allreduce(MPI.IN_PLACE, sizes, op=MPI.MIN)
         for b in state.bodies:

@@ -78,6 +78,7 @@ WORK = (
     Work("f_int", "owned", "vector"),  # the bodies' internal forces
     Work("f_hg", "owned", "vector", "hourglass"),  # hourglass control's forces
     Work("omega_hg2", "owned", need="hourglass"),  # its springs' squared frequency (stable step)
+    Work("damper_rate2", "owned", need="damped"),  # MACHDYN's hourglass dampers' squared rate (stable step)
     Work("hg_psi", "owned", need="variational"),  # the variational hourglass penalty's energy
     Work("f_visc", "owned", "vector", "viscous"),  # artificial viscosity's forces
     Work("viscous_heating", "owned", need="viscous"),  # the power it turns to heat [W]
@@ -126,6 +127,7 @@ class RankState:
         self.hourglass = any(f.hourglass_form for f in forms)
         self.viscous = any(f.viscous for f in forms)
         self.needs = {"hessian": self.eta > 0, "hourglass": self.hourglass, "viscous": self.viscous,
+                      "damped": any(f.damped for f in forms),
                       "variational": any(f.hourglass_penalty for f in forms),
                       "limited": self.viscous or limited}
         # the formulations, laws and their states, the updated reference and damage the bodies use

@@ -66,6 +66,7 @@ class Formulation(ABC):
     hourglass_penalty = False  # its hourglass force derives from a penalty energy (the variational form)
     absorbs_hourglass_work = False  # its hourglass force is not a potential one: its work is absorbed [G eq. 32]
     viscous = False  # it adds Monaghan's artificial viscosity
+    damped = False  # a yielded pair takes MACHDYN's viscous hourglass force: its dampers bound the step
     eta = 0.0  # Hessian's-difference stabilisation [V eq. 17]: 0 without
     weighted_hessian = True  # the Hessian's linear correction weighted by the kernel (with eta > 0)
     update_every = 0  # steps between reference updates (1 with an Eulerian kernel; 0: not by count)
@@ -127,18 +128,20 @@ class Formulation(ABC):
         """w_q q_q over the body's owned integration points, q = density(arrays) per row of a
         point set's arrays (a density per unit reference volume: psi, plastic work)."""
 
-    def stable_step(self, state, body, omega2: np.ndarray, step_limit: np.ndarray, scale: float) -> tuple:
+    def stable_step(self, state, body, omega2: np.ndarray, step_limit: np.ndarray, scale: float,
+                    dampers: bool = True) -> tuple:
         """(stable step, largest incremental log strain, the row that sets the step or -1)
-        over the body's owned particles, with its hourglass springs (none: HOURGLASS_OFF), the
-        interactions' springs' squared frequencies `omega2` and the motion's `step_limit`
-        (each empty: none), the body's own frequencies times `scale`
-        (formulations.tlsph.stable_time_step)."""
+        over the body's owned particles, with its hourglass springs (none: HOURGLASS_OFF), its
+        hourglass dampers' rates (unless not `dampers`), the interactions' springs' squared
+        frequencies `omega2` and the motion's `step_limit` (each empty: none), the body's own
+        frequencies times `scale` (formulations.tlsph.stable_time_step)."""
         from parsph.formulations import tlsph  # which imports this module
         ref = body.relation.ref
         return tlsph.stable_time_step(
             body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
             ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
-            state.broken, state.omega_hg2, self.hourglass_form, omega2, step_limit, scale, state.scratch33)
+            state.broken, state.omega_hg2, self.hourglass_form, state.damper_rate2 if dampers else state.damper_rate2[:0],
+            omega2, step_limit, scale, state.scratch33)
 
 
 class Running:

@@ -129,6 +129,7 @@ class NodalFormulation(Formulation):
         reference = tlsph.REFERENCE_CURRENT if self.eulerian else \
             tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
         viscous = self.absorbs_hourglass_work and self.plastic_hourglass == "viscous"
+        self.damped = viscous
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
             dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, failure, viscous)
 
@@ -229,10 +230,10 @@ class NodalFormulation(Formulation):
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
                         ref.q_sum, ref.dx, ref.hgc, a["d"], a["fs"], a["VP"], a["B"], a["youngs"],
                         state.volume, state.mass, state.f_int, state.f_hg, running.stable.bound_hourglass, state.omega_hg2,
-                        tensor, a["v"], a["plastic"], state.support, kind, constants)
+                        state.damper_rate2, tensor, a["v"], a["plastic"], state.support, kind, constants)
         reads = tuple(force_fields[p] for p in force_neighbours)
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
-                         writes=("f_int", "f_hg", "omega_hg2"), force_row=True))
+                         writes=("f_int", "f_hg", "omega_hg2", "damper_rate2"), force_row=True))
         if any(self.viscosity):
             def viscosity():
                 ref = body.relation.ref

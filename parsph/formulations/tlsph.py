@@ -189,10 +189,10 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
     def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, d, fs, VP, B, youngs,
-               volume, mass, f_int, f_hg, bound, omega_hg2, tensor, v, plastic, support, kind, vc):
+               volume, mass, f_int, f_hg, bound, omega_hg2, damper_rate2, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
-        frequency (see `stable_time_step`). With `viscous`, a pair of which a particle's
+        frequency and, with `viscous`, damper_rate2 on the dampers' rate (see `stable_time_step`). With `viscous`, a pair of which a particle's
         equivalent plastic strain (column vc[4] of `plastic`, the state just computed)
         exceeds VISCOUS_ONSET takes LAMMPS MACHDYN's viscous hourglass force instead of the
         spring: with gamma = (F_i + F_j) X_ij / 2 - x_ij, r = |x_ij|, h the mean support,
@@ -205,7 +205,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
         as the springs do (an explicit damper is stable for dt < 2 / rate): the damping matrix
         is a Laplacian of pair coefficients k_ij along n_ij (the force per unit closing
         speed), whose largest rate is at most max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i
-        (the springs' argument). With
+        (the springs' argument); its square goes to damper_rate2. With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -334,12 +334,14 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                 tensor[1, 2] = tensor[2, 1] = k4
                 tensor[0, 2] = tensor[2, 0] = k5
                 omega_hg2[i] = 2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]
-                if damped:  # an explicit damper is stable for dt below 2 / (its damping rate)
-                    tensor[0, 0], tensor[1, 1], tensor[2, 2] = c0, c1, c2
-                    tensor[0, 1] = tensor[1, 0] = c3
-                    tensor[1, 2] = tensor[2, 1] = c4
-                    tensor[0, 2] = tensor[2, 0] = c5
-                    omega_hg2[i] += (2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]) ** 2
+                if viscous:  # an explicit damper is stable for dt below 2 / (its damping rate)
+                    damper_rate2[i] = 0.0
+                    if damped:
+                        tensor[0, 0], tensor[1, 1], tensor[2, 2] = c0, c1, c2
+                        tensor[0, 1] = tensor[1, 0] = c3
+                        tensor[1, 2] = tensor[2, 1] = c4
+                        tensor[0, 2] = tensor[2, 0] = c5
+                        damper_rate2[i] = (2.0 * symmetric_extremes(tensor, dim)[1] / mass[i]) ** 2
             elif bound and hourglass == HOURGLASS_VARIATIONAL:
                 omega_hg2[i] = 2.0 * k0 / mass[i]
 
@@ -498,10 +500,10 @@ def spring_terms(k, x0, x1, x2, t0, t1, t2, t3, t4, t5):
 
 @njit(cache=True, _nrt=False)
 def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, dim, broken, omega_hg2, hourglass,
-                     omega_c2, step_limit, scale, C):
+                     damper_rate2, omega_c2, step_limit, scale, C):
     """(largest stable step before the CFL factor, largest incremental log strain) of the
     owned particles lo..hi-1:
-        dt_i = 2 / sqrt(k^2 (omega_el^2 + omega_hg^2) + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
+        dt_i = 2 / sqrt(k^2 (omega_el^2 + omega_hg^2) + r_d^2 + omega_c^2),  omega_el = 2 c_i / (l_i s_min),
     k (`scale`) the body's factor that makes the body's own part match the largest frequency
     of its discrete force operator when measured (parsph.operator_frequency, stability.StableStep.calibrate),
     l_i the nearest reference neighbour distance, s_min the smallest principal stretch of
@@ -517,7 +519,9 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     0.1 h_ij) of it), in every direction with the variational one; as (n.(x_i - x_j))^2 <=
     2 (n.x_i)^2 + 2 (n.x_j)^2, the largest eigenvalue of M^-1 K is at most
     max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i, about 1/dim of the scalar sum
-    2 sum_j k_ij / m_i on a disordered lattice (the same in 1D). The strain max |ln s| over
+    2 sum_j k_ij / m_i on a disordered lattice (the same in 1D). r_d^2 (damper_rate2, empty
+    without MACHDYN's viscous hourglass force) bounds its dampers' rate the same way, written
+    by the forces stage; k does not scale it (a damper's limit 2 / r_d is not the springs'). The strain max |ln s| over
     the principal stretches of fs is the distortion measure of the adaptive reference
     update. omega_c^2 (omega_c2, empty without contact) bounds the contact springs the same
     way (parsph.contact). `step_limit` (empty without artificial viscosity or contact) caps
@@ -542,6 +546,8 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
         worst = max(worst, math.log(f_max), -math.log(f_min))
         w_el = 2.0 * wave_speed * math.sqrt(stiffening) * stab[i] ** 0.75 / length
         w2 = scale * scale * (w_el * w_el + (omega_hg2[i] if hourglass != HOURGLASS_OFF else 0.0))
+        if len(damper_rate2):
+            w2 += damper_rate2[i]
         if len(omega_c2):
             w2 += omega_c2[i]
         dt_i = 2.0 / math.sqrt(w2)
