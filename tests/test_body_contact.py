@@ -354,7 +354,7 @@ def test_contact_is_the_same_on_1_and_3_ranks_and_across_a_restart(tmp_path):
     boundary with 3 ranks): the same history and final state bit for bit on 1 and 3 ranks,
     and a run checkpointed mid-contact on 2 ranks, restarted on 3, continues exactly."""
     coarse = ["--set", "parameters.spacing=2e-3", "--set", "time.end=4e-5"]
-    rings = ["--set", "parameters.spacing=5e-3", "--set", "time.max_steps=120"]  # touching from step ~45
+    rings = ["--set", "parameters.spacing=5e-3", "--set", "time.max_steps=120"]  # touching from step 85
     bars, split = RUNS / "bars_impact.toml", tmp_path / "split"
     straight = [(bars, coarse, tmp_path / "bars"), (RUNS / "rings_contact.toml", rings, tmp_path / "rings")]
     # three MPI jobs (conftest.parsph_by_ranks): one rank; two ranks; three ranks straight and restarted
