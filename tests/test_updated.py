@@ -238,19 +238,19 @@ def test_punch_reaches_half_compression_with_ordered_particles():
     depth_ul, force_ul, ordered_ul, regular_ul, ul = punch("punch_ul")
     for depth in (depth_hg, depth_eta, depth_ul):
         assert depth == pytest.approx(5e-3, rel=1e-2)
-    assert ordered_hg > 0.8  # measured 0.92
-    assert ordered_eta > 0.8  # measured 0.86 (0.74 with the printed Hessian correction)
-    assert ordered_ul > 0.75 and regular_ul > 0.8 * regular_hg  # measured 0.85; 0.53 against 0.45
-    assert 2 <= ul.topology.count <= 20  # measured 6
+    assert ordered_hg > 0.8  # measured 0.91
+    assert ordered_eta > 0.8  # measured 0.88 (0.75 with the printed Hessian correction)
+    assert ordered_ul > 0.75 and regular_ul > 0.8 * regular_hg  # measured 0.81; 0.50 against 0.45
+    assert 2 <= ul.topology.count <= 20  # measured 7
     assert force_hg < -5e3  # measured -10.6 kN per metre of thickness
-    assert force_eta == pytest.approx(force_hg, rel=0.2)  # measured -12.1 kN
-    assert force_ul == pytest.approx(force_hg, rel=0.1)  # measured -10.5 kN
+    assert force_eta == pytest.approx(force_hg, rel=0.2)  # measured -12.2 kN
+    assert force_ul == pytest.approx(force_hg, rel=0.1)  # measured -9.6 kN (-10.4 at 48 %: it swings with the last updates)
 
 
 def test_punch_without_stabilisation_disorders():
     depth, _, ordered, regular, _ = punch("punch", ["formulation.hourglass=0"])
     assert depth == pytest.approx(5e-3, rel=1e-2)
-    assert ordered < 0.3 and regular < 0.2  # measured 0.12 and 0.09: particles pair up under the tool
+    assert ordered < 0.3 and regular < 0.2  # measured 0.13 and 0.12: particles pair up under the tool
 
 
 def test_ulsph_without_a_trigger_is_refused():
