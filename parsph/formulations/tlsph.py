@@ -205,7 +205,9 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
         as the springs do (an explicit damper is stable for dt < 2 / rate): the damping matrix
         is a Laplacian of pair coefficients k_ij along n_ij (the force per unit closing
         speed), whose largest rate is at most max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i
-        (the springs' argument); its square goes to damper_rate2. With
+        (the springs' argument); its square goes to damper_rate2. Pairs not yet past the onset
+        count too (their e at least its floor): a damper that switches on within a step is then
+        stable in it (at an impact the first yield comes in the first step, sized before it). With
         Hessian stabilisation the force is the standard one for V P - B with g plus the
         standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
         its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
@@ -271,7 +273,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         xa = component(a, x0, x1, x2)
                         di += (fi - xa) * xa
                         dj += (fj - xa) * xa
-                    if viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET:
+                    yielded = viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET
+                    if yielded or (viscous and bound and r > 0.0):
                         h = 0.5 * (support[i] + support[j])
                         r0 = 0.0
                         err2 = 0.0
@@ -288,22 +291,24 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             approach += xa * (v[j, a] - v[i, a])
                             r0 += dx[p, a] * dx[p, a]
                         r0 = math.sqrt(r0)
-                        approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
                         e = max(math.sqrt(err2) / r0, 0.05)
                         slope = value_and_slope(kind, r0, h, dim)[1]
                         scale = mass[i] * mass[j] * e * vc[0] * vc[1] / vc[2] * (youngs[i] / vc[3]) * (
                             youngs[j] / vc[3])
+                        if bound:  # the damper's coefficient on the pair's closing speed, along x_ij
+                            # (a pair not yet yielded too: its damper may switch on within the step)
+                            damped = True
+                            c0, c1, c2, c3, c4, c5 = spring_terms(
+                                scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)), x0, x1, x2,
+                                c0, c1, c2, c3, c4, c5)
+                    if yielded:
+                        approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
                         if approach * closing < 0.0:
                             mu = h * approach / (r + 0.1 * h)
                             c = -scale * mu * slope / (r + 0.01 * h)
                             h0 += c * x0
                             h1 += c * x1
                             h2 += c * x2
-                        if bound:  # the damper's coefficient on the pair's closing speed, along x_ij
-                            damped = True
-                            c0, c1, c2, c3, c4, c5 = spring_terms(
-                                scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)), x0, x1, x2,
-                                c0, c1, c2, c3, c4, c5)
                     elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
                         # the regularising length 0.1 h_ij, h_ij the pair's mean support
                         c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + 0.1 * (0.5 * (support[i] + support[j]))))
