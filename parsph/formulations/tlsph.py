@@ -274,12 +274,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         di += (fi - xa) * xa
                         dj += (fj - xa) * xa
                     yielded = viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET
+                    h = closing = approach = scale = slope = 0.0
                     if yielded or (viscous and bound and r > 0.0):
                         h = 0.5 * (support[i] + support[j])
                         r0 = 0.0
                         err2 = 0.0
-                        closing = 0.0
-                        approach = 0.0
                         for a in range(dim):
                             fi = 0.0
                             for b in range(dim):
