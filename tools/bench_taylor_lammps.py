@@ -74,7 +74,8 @@ The LAMMPS input, as a MACHDYN user would write it for this bar, from parsph's r
   examples) times its per-particle 2 radius / c (radius = support / 2: 1.5 spacings in 2d,
   1 in 3d; in 2d with the examples' diameter 2.01 spacings it takes about 1790 steps
   instead of about 1210); the run stops at the first step past the end time (fix halt on
-  f_dtfix, the fix's accumulated time). parsph: its default step (time.cfl = 0.6).
+  f_dtfix, the fix's accumulated time). parsph: its default step (time.cfl = 0.85 of the
+  step from each body's force operator).
 - 2d: periodic z of length 2e6 mm, as in tools/bench_lammps.py (pair smd/tlsph applies
   minimum_image to an uninitialised vector once per step; a long period keeps LAMMPS from
   aborting, the value is overwritten right after).
