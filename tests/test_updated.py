@@ -244,7 +244,7 @@ def test_punch_reaches_half_compression_with_ordered_particles():
     assert 2 <= ul.topology.count <= 20  # measured 7
     assert force_hg < -5e3  # measured -10.6 kN per metre of thickness
     assert force_eta == pytest.approx(force_hg, rel=0.2)  # measured -12.2 kN
-    assert force_ul == pytest.approx(force_hg, rel=0.1)  # measured -9.6 kN (-10.4 at 48 %: it swings with the last updates)
+    assert force_ul == pytest.approx(force_hg, rel=0.1)  # measured -9.6 kN (-10.4 at 48 %)
 
 
 def test_punch_without_stabilisation_disorders():

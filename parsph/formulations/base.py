@@ -140,8 +140,8 @@ class Formulation(ABC):
         return tlsph.stable_time_step(
             body.lo, body.hi, state.fs if self.updated else state.F, state.F, state.J, ref.min_spacing,
             ref.stiffening, body.constants.wave_speed, body.law.law_id, body.constants.values, state.dim,
-            state.broken, state.omega_hg2, self.hourglass_form, state.damper_rate2 if dampers else state.damper_rate2[:0],
-            omega2, step_limit, scale, state.scratch33)
+            state.broken, state.omega_hg2, self.hourglass_form,
+            state.damper_rate2 if dampers else state.damper_rate2[:0], omega2, step_limit, scale, state.scratch33)
 
 
 class Running:

@@ -192,10 +192,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                volume, mass, f_int, f_hg, bound, omega_hg2, damper_rate2, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
-        frequency and, with `viscous`, damper_rate2 on the dampers' rate (see `stable_time_step`). With `viscous`, a pair of which a particle's
-        equivalent plastic strain (column vc[4] of `plastic`, the state just computed)
-        exceeds VISCOUS_ONSET takes LAMMPS MACHDYN's viscous hourglass force instead of the
-        spring: with gamma = (F_i + F_j) X_ij / 2 - x_ij, r = |x_ij|, h the mean support,
+        frequency and, with `viscous`, damper_rate2 on the dampers' rate (see
+        `stable_time_step`). With `viscous`, a pair of which a particle's equivalent plastic
+        strain (column vc[4] of `plastic`, the state just computed) exceeds VISCOUS_ONSET
+        takes LAMMPS MACHDYN's viscous hourglass force instead of the spring: with
+        gamma = (F_i + F_j) X_ij / 2 - x_ij, r = |x_ij|, h the mean support,
         v = x_ij . v_ij / (r + h/10) limited to 1 % of the wave speed c0, when
         v gamma . x_ij < 0,
             f_i += m_i m_j (-e alpha c0 mu / rho0) W'(|X_ij|) x_ij / (r + h/100),
