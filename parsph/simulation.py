@@ -24,6 +24,7 @@ from parsph.bc import apply_initial_conditions
 from parsph.conditions import Conditions
 from parsph.diagnostics import history_row
 from parsph.errors import ParsphError
+from parsph.fields import Field, register
 from parsph.failure import Failure
 from parsph.formulations.base import Running
 from parsph.ledger import Ledger
@@ -36,6 +37,13 @@ from parsph.stability import StableStep, check_hourglass_stiffness
 from parsph.state import Body, RankState
 from parsph.topology import Topology
 from parsph.walls import Walls
+
+
+# the velocity the last force evaluation saw (after the first half-kick and the obstacles):
+# viscosity, MACHDYN's hourglass dampers, damped contact and ties read it, so a restart
+# evaluates the forces at it, not at the step's end velocity
+register(Field("v_forces", "vector", owner="velocity forces",
+               doc="velocity at the last force evaluation [m/s] (a restart's forces)"))
 
 
 class Simulation:
@@ -52,7 +60,8 @@ class Simulation:
                   for b, spec in enumerate(scene.bodies)]
         # the step allowed by the particles' motion is limited by contact and surfaces (and viscosity)
         limited = bool(scene.contact or scene.surfaces)
-        self.state = state = RankState(bodies, offsets, dim, comm, sorted(scene.groups), limited)
+        self.state = state = RankState(bodies, offsets, dim, comm, sorted(scene.groups), limited,
+                                       bool(scene.contact or scene.ties))
         self.failure = Failure(bodies, dim, comm, restart["cut"] if restart else None)
         self.topology = Topology(scene, bodies, local, comm)
         self.stage_seconds = collections.defaultdict(float)  # wall time per stage of the step
@@ -85,7 +94,7 @@ class Simulation:
         if self.interactions.contact is not None and restart is None:
             self.interactions.contact.check_apart(state.gid, state.body, state.X[:n] + state.u[:n],
                                                   [b.name for b in bodies])
-        self.compute_forces()
+        self._forces_at_set_up(restart is not None and "v_forces" in local.fields)  # (older checkpoints lack it)
         factors = restart["clock"].get("step_factors") if restart else None
         if factors is None:
             # a flattened particle stops the run here, named, before the measurement perturbs it
@@ -100,6 +109,19 @@ class Simulation:
         self.ledger.external = self.conditions.external_force(state, self.t)  # for the work integral
         self.stable.start(state, self.topology, self.interactions, self.step_count, self.t,
                           restart["clock"] if restart else None)
+
+    def _forces_at_set_up(self, checkpointed: bool) -> None:
+        """The first force evaluation; with a checkpoint's `v_forces`, at the velocity the
+        checkpointed step's evaluation saw, where a force reads the velocity (then the step's
+        end velocity is restored), so that the run continues bit for bit."""
+        state, n = self.state, self.state.n_owned
+        if not (checkpointed and "v_forces" in state.carried):
+            self.compute_forces()
+            return
+        v_end = state.v[:n].copy()
+        state.v[:n] = state.particles.owned("v_forces")
+        self.compute_forces()
+        state.v[:n] = v_end
 
     def adopt(self, local: LocalBody) -> None:
         """Take `local` (owned particles with two ghost layers and all their arrays) as this
@@ -283,6 +305,8 @@ class Simulation:
                                conditions.rigid_bodies)
             self.ledger.obstacles_moved(state, v_half, u_drift)
         self.running.dt = dt
+        if "v_forces" in state.carried:
+            state.particles.owned("v_forces")[:] = state.v[:n]
         self.compute_forces(move_reference=state.eulerian)
         if contact is not None:
             contact.check_inside(state.gid, state.body, [b.name for b in state.bodies], self.step_count + 1, self.t)

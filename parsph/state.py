@@ -116,7 +116,8 @@ class RankState:
     viscosity (their arrays), and the owners of the registered fields the particles carry.
     Each body's kernel, eta and schedule are its kernel relation's (parsph.kernel_relation)."""
 
-    def __init__(self, bodies: list, offsets: np.ndarray, dim: int, comm, group_names: list, limited: bool):
+    def __init__(self, bodies: list, offsets: np.ndarray, dim: int, comm, group_names: list, limited: bool,
+                 interacting: bool = False):
         self.bodies, self.dim, self.comm, self.group_names = bodies, dim, comm, group_names
         self.offsets = offsets  # the first global id of each body, and the total
         forms = [b.formulation for b in bodies]
@@ -138,6 +139,8 @@ class RankState:
             self.owners.add("damage")
         if self.viscous:
             self.owners.add("viscosity")
+        if self.viscous or self.needs["damped"] or interacting:  # forces that read the velocity
+            self.owners.add("velocity forces")
         self.carried = fields.carried(self.owners)  # the registered fields the particles carry
         need = {w.name: w.need for w in WORK}
         self.forces = [f for f in FORCES if need[f.name] is None or self.needs[need[f.name]]]  # those the bodies need

@@ -123,6 +123,34 @@ def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
             assert np.array_equal(ha[name], hb[name]), (scene, name)
 
 
+def test_forces_that_read_the_velocity_restart_bit_for_bit(tmp_path):
+    """Monaghan's viscosity (the flyer plate) and MACHDYN's viscous hourglass dampers (the
+    Taylor bar) read the velocity, which their evaluation sees after the step's first
+    half-kick: a checkpoint on 2 ranks (step 40), restarted on 3, continues exactly, the
+    velocity, the viscous work and the energies too (a restart evaluating them at the step's
+    end velocity did not)."""
+    cases = {"flyer_plate": [], "taylor_impact": ["--set", "formulation.plastic_hourglass=viscous"]}
+
+    def command(scene, out, *extra):
+        return ["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *cases[scene], *extra]
+
+    assert_runs_by_ranks([(2, command(scene, tmp_path / scene / out, *extra)) for scene in cases
+                          for out, extra in (("straight", ["--set", "time.max_steps=80"]),
+                                             ("split", ["--set", "time.max_steps=40",
+                                                        "--set", "output.checkpoint_every=40"]))],
+                         tmp_path / "batch")
+    assert_runs_by_ranks([(3, command(scene, tmp_path / scene / "split", "--set", "time.max_steps=80",
+                                      "--restart", "latest")) for scene in cases], tmp_path / "batch_restart")
+    for scene in cases:
+        _, a = final(tmp_path / scene / "straight")
+        _, b = final(tmp_path / scene / "split")
+        for field in a:
+            assert np.array_equal(a[field], b[field]), (scene, field)
+        ha, hb = history(tmp_path / scene / "straight"), history(tmp_path / scene / "split")
+        for name in ("viscous_work", "hourglass_energy", "external_work", "total_energy"):
+            assert np.array_equal(ha[name], hb[name]), (scene, name)
+
+
 def test_restart_refuses_other_physics_and_allows_a_new_end_time(tmp_path):
     out = tmp_path / "run"
     run(out, 1, "--set", "time.max_steps=20", "--set", "output.checkpoint_every=10")

@@ -2,7 +2,8 @@
 
 A checkpoint `OUT/checkpoints/step_NNNNNNNN.h5` holds, in global-id order, the reference
 configuration (positions, measures, volumes, masses, kernel supports, group membership),
-the state (displacement, velocity) and, in the updated formulation, the current reference
+the state (displacement, velocity; where a force reads the velocity, the velocity its last
+evaluation saw) and, in the updated formulation, the current reference
 (X^r, F^r, V^r); the checkpointed fields of any other point set (stress points) in a group
 of that name, in its global-id order; the pairs cracks have cut (material.break_pairs); plus
 the clock (time, step, dt, reference updates), the accumulated energies, the output
