@@ -98,26 +98,32 @@ def test_updated_reference_restart_continues_bit_for_bit(tmp_path):
     assert ha["reference_updates"][-1] == 13
 
 
-@pytest.mark.mpi
-def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
-    """Taylor bar (J2 plasticity at the particles, wall contact) and steel ring (at KBM's
-    stress points too): a checkpoint while they yield (step 40), restarted on another rank
-    count, continues exactly, plastic strain and energies too. The two scenes' straight and
-    stopped runs go in one MPI job (conftest.parsph_by_ranks), then their restarts in one."""
-    names = ("position", "velocity", "J", "plastic_strain", "plastic_work")
-    fields = ["--set", "output.snapshot_fields=" + str(list(names)).replace("'", '"')]
-    scenes = ("taylor_impact", "ring_shear_bands")
-
+def straight_and_restarted(tmp_path, cases: dict) -> None:
+    """Each scene of `cases` (name -> its extra command-line options) run straight to step 80
+    and stopped at step 40 with a checkpoint, all on 2 ranks in one MPI job
+    (conftest.parsph_by_ranks), then the stopped runs restarted on 3 ranks to step 80 in
+    another: TMP/SCENE/straight and TMP/SCENE/split."""
     def command(scene, out, *extra):
-        return ["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *extra, *fields]
+        return ["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *cases[scene], *extra]
 
-    assert_runs_by_ranks([(2, command(scene, tmp_path / scene / out, *extra)) for scene in scenes
+    assert_runs_by_ranks([(2, command(scene, tmp_path / scene / out, *extra)) for scene in cases
                           for out, extra in (("straight", ["--set", "time.max_steps=80"]),
                                              ("split", ["--set", "time.max_steps=40",
                                                         "--set", "output.checkpoint_every=40"]))],
                          tmp_path / "batch")
     assert_runs_by_ranks([(3, command(scene, tmp_path / scene / "split", "--set", "time.max_steps=80",
-                                      "--restart", "latest")) for scene in scenes], tmp_path / "batch_restart")
+                                      "--restart", "latest")) for scene in cases], tmp_path / "batch_restart")
+
+
+@pytest.mark.mpi
+def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
+    """Taylor bar (J2 plasticity at the particles, wall contact) and steel ring (at KBM's
+    stress points too): a checkpoint while they yield (step 40), restarted on another rank
+    count, continues exactly, plastic strain and energies too."""
+    names = ("position", "velocity", "J", "plastic_strain", "plastic_work")
+    fields = ["--set", "output.snapshot_fields=" + str(list(names)).replace("'", '"')]
+    scenes = ("taylor_impact", "ring_shear_bands")
+    straight_and_restarted(tmp_path, {scene: fields for scene in scenes})
     for scene in scenes:
         _, a = final(tmp_path / scene / "straight", names)
         _, b = final(tmp_path / scene / "split", names)
@@ -129,6 +135,7 @@ def test_plastic_state_restart_continues_bit_for_bit(tmp_path):
             assert np.array_equal(ha[name], hb[name]), (scene, name)
 
 
+@pytest.mark.mpi
 def test_forces_that_read_the_velocity_restart_bit_for_bit(tmp_path):
     """Monaghan's viscosity (the flyer plate) and MACHDYN's viscous hourglass dampers (the
     Taylor bar) read the velocity, which their evaluation sees after the step's first
@@ -136,17 +143,7 @@ def test_forces_that_read_the_velocity_restart_bit_for_bit(tmp_path):
     velocity, the viscous work and the energies too (a restart evaluating them at the step's
     end velocity did not)."""
     cases = {"flyer_plate": [], "taylor_impact": ["--set", "formulation.plastic_hourglass=viscous"]}
-
-    def command(scene, out, *extra):
-        return ["run", RUNS / f"{scene}.toml", "--out", out, "--quiet", *PATCH, *cases[scene], *extra]
-
-    assert_runs_by_ranks([(2, command(scene, tmp_path / scene / out, *extra)) for scene in cases
-                          for out, extra in (("straight", ["--set", "time.max_steps=80"]),
-                                             ("split", ["--set", "time.max_steps=40",
-                                                        "--set", "output.checkpoint_every=40"]))],
-                         tmp_path / "batch")
-    assert_runs_by_ranks([(3, command(scene, tmp_path / scene / "split", "--set", "time.max_steps=80",
-                                      "--restart", "latest")) for scene in cases], tmp_path / "batch_restart")
+    straight_and_restarted(tmp_path, cases)
     for scene in cases:
         _, a = final(tmp_path / scene / "straight")
         _, b = final(tmp_path / scene / "split")
