@@ -44,7 +44,7 @@ def quadrature(sim) -> tuple:
 def disorder(sim) -> np.ndarray:
     """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
     error, state = tlsph.hourglass_error(sim.state.dim), sim.state
-    return by_relation(sim, lambda r, out: error(state.n_owned, r.ref.ptr, r.ref.idx, r.ref.dx, state.support,
+    return by_relation(sim, lambda r, out: error(state.n_owned, r.ref.ptr, r.ref.idx, state.reference_positions, state.support,
                                                  KERNEL_NAMES.index(r.kernel), state.d, state.fs, out, state.scratch33))
 
 

@@ -205,6 +205,12 @@ class RankState:
             b.set_rows[name] = tuple(int(k) for k in np.searchsorted(body, [b.index, b.index + 1]))
         return PointSet(name, arrays["gid"], local.n_owned, Decomposition(local, self.comm), carried, arrays)
 
+    @property
+    def reference_positions(self) -> np.ndarray:
+        """The positions the kernel relations' reference data were built at: X, or X^r when a
+        reference moves (the pair loops form X_j - X_i from them)."""
+        return self.Xr if self.updated else self.X
+
     def reference_shift(self) -> np.ndarray:
         """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where
         X^r = X + u (as it is after every move of its reference), so that d is exactly zero

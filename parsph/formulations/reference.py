@@ -34,8 +34,8 @@ class ReferenceData:
     """CSR rows of the owned particles (indices into the rank's local arrays)."""
 
     ptr: np.ndarray
-    idx: np.ndarray  # 32-bit neighbour rows
-    dx: np.ndarray  # X_j - X_i in the reference (its kernel values and lengths are formed from it)
+    idx: np.ndarray  # 32-bit neighbour rows (X_j - X_i is formed from the reference positions
+    # by the pair loops, as are the kernel values and regularising lengths)
     g: np.ndarray
     g_rev: np.ndarray
     g_sum: np.ndarray
@@ -112,10 +112,6 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
     idx = np.ascontiguousarray(pairs.idx[:end], dtype=np.int32)
-    if np.isnan(ref.g_rev[:end]).any():
-        raise ParsphError("internal: a neighbour of an owned particle has no reference row")
-    if not eta > 0:
-        ref.rev = None  # only the stabilisation's reverse values need it: freed before hgc is made
     hgc = np.zeros(0)
     if any(o.hourglass_form for o in options):
         hgc = np.zeros(end)
@@ -149,10 +145,14 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         has_g = size_g > 0
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
+    # the per-pair temporaries go before the reverse gradients are gathered: they set the peak memory
+    ref.dx = ref.w = ref.h = None
+    g_rev = reverse_values(ref.g, ref.rev[:end])
+    if np.isnan(g_rev).any():
+        raise ParsphError("internal: a neighbour of an owned particle has no reference row")
     return ReferenceData(
-        ptr=ptr, idx=idx, dx=np.ascontiguousarray(ref.dx[:end]), g=np.ascontiguousarray(ref.g[:end]),
-        g_rev=np.ascontiguousarray(ref.g_rev[:end]), g_sum=np.ascontiguousarray(ref.g_sum[:n]), hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum,
-        gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
+        ptr=ptr, idx=idx, g=np.ascontiguousarray(ref.g[:end]), g_rev=g_rev, g_sum=np.ascontiguousarray(ref.g_sum[:n]),
+        hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum, gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
 
 
 def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np.ndarray,
@@ -176,7 +176,7 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
     if stabilised:
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
-        ptr=ptr, idx=idx, dx=dx, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
+        ptr=ptr, idx=idx, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
         q=kept.q[:end] if stabilised else np.zeros((0, dim)),
         q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
         q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),

@@ -60,7 +60,7 @@ from parsph.formulations.base import CompiledOnce
 from parsph.kernels.functions import value, value_and_slope
 from parsph.materials import update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
-from parsph.small_vectors import added, component, replaced
+from parsph.small_vectors import added, component, replaced, separation
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
 # the reference of F: the initial configuration, an updated one [V §3.1], or the current
@@ -136,7 +136,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
     """kinematics_stress, stage 1, for its switches (`variational`: the variational hourglass
     form's penalty and hourglass stress)."""
     @njit(cache=True, _nrt=False)
-    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, dx, hgc, d, volume, youngs, c, state, trial, damage_state,
+    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, X, hgc, d, volume, youngs, c, state, trial, damage_state,
                           damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial) and (variational form)
@@ -167,17 +167,18 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                 for p in range(ptr[i], ptr[i + 1]):
                     j = idx[p]
                     k = hgc[p] * youngs[i]
-                    e2 = 0.0
+                    e0, e1, e2 = separation(X, i, j, dim)
+                    square = 0.0
                     for a in range(dim):
                         fx = 0.0
                         for b in range(dim):
-                            fx += fs[i, a, b] * dx[p, b]
-                        err[a] = fx - dx[p, a] - d[j, a] + d[i, a]
-                        e2 += err[a] * err[a]
-                    phi += 0.5 * k * e2
+                            fx += fs[i, a, b] * component(b, e0, e1, e2)
+                        err[a] = fx - component(a, e0, e1, e2) - d[j, a] + d[i, a]
+                        square += err[a] * err[a]
+                    phi += 0.5 * k * square
                     for a in range(dim):
                         for b in range(dim):
-                            VP[i, a, b] += k * err[a] * dx[p, b]
+                            VP[i, a, b] += k * err[a] * component(b, e0, e1, e2)
                 hg_psi[i] = phi
         return first_bad
 
@@ -188,7 +189,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
 def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, viscous: bool):
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
-    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, dx, hgc, d, fs, VP, B, youngs,
+    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, X, hgc, d, fs, VP, B, youngs,
                volume, mass, f_int, f_hg, bound, omega_hg2, damper_rate2, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
@@ -256,10 +257,11 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         f0, f1, f2 = added(a, s, f0, f1, f2)
                 if hourglass == HOURGLASS_PAPER:
                     # [G eq. 27, 32]: errors projected on the current separation, central force
+                    e0, e1, e2 = separation(X, i, j, dim)
                     x0 = x1 = x2 = 0.0
                     r2 = 0.0
                     for a in range(dim):
-                        xa = dx[p, a] + d[j, a] - d[i, a]
+                        xa = component(a, e0, e1, e2) + d[j, a] - d[i, a]
                         x0, x1, x2 = replaced(a, xa, x0, x1, x2)
                         r2 += xa * xa
                     r = math.sqrt(r2)
@@ -269,8 +271,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         fi = 0.0
                         fj = 0.0
                         for b in range(dim):
-                            fi += fs[i, a, b] * dx[p, b]
-                            fj += fs[j, a, b] * dx[p, b]
+                            fi += fs[i, a, b] * component(b, e0, e1, e2)
+                            fj += fs[j, a, b] * component(b, e0, e1, e2)
                         xa = component(a, x0, x1, x2)
                         di += (fi - xa) * xa
                         dj += (fj - xa) * xa
@@ -283,13 +285,13 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         for a in range(dim):
                             fi = 0.0
                             for b in range(dim):
-                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * dx[p, b]
+                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * component(b, e0, e1, e2)
                             xa = component(a, x0, x1, x2)
                             gamma = fi - xa
                             err2 += gamma * gamma
                             closing += gamma * xa
                             approach += xa * (v[j, a] - v[i, a])
-                            r0 += dx[p, a] * dx[p, a]
+                            r0 += component(a, e0, e1, e2) * component(a, e0, e1, e2)
                         r0 = math.sqrt(r0)
                         e = max(math.sqrt(err2) / r0, 0.05)
                         slope = value_and_slope(kind, r0, h, dim)[1]
@@ -320,13 +322,14 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                                                                   k0, k1, k2, k3, k4, k5)
                 elif hourglass == HOURGLASS_VARIATIONAL:
                     # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
+                    e0, e1, e2 = separation(X, i, j, dim)
                     for a in range(dim):
-                        xa = dx[p, a] + d[j, a] - d[i, a]
+                        xa = component(a, e0, e1, e2) + d[j, a] - d[i, a]
                         fi = 0.0
                         fj = 0.0
                         for b in range(dim):
-                            fi += fs[i, a, b] * dx[p, b]
-                            fj += fs[j, a, b] * dx[p, b]
+                            fi += fs[i, a, b] * component(b, e0, e1, e2)
+                            fj += fs[j, a, b] * component(b, e0, e1, e2)
                         h0, h1, h2 = added(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))), h0, h1, h2)
                     k0 += hgc[p] * (youngs[i] + youngs[j])
             for a in range(dim):
@@ -431,7 +434,7 @@ def hourglass_coefficients(form, ptr, idx, dx, w, h, volume, measure, alpha, bod
 @functools.lru_cache(maxsize=None)
 def hourglass_error(dim: int):
     """The disorder measure per particle for dimension `dim` (compiled for it: the loops over
-    components unrolled), a kernel (n, ptr, idx, dx, support, kind, u, F, out, G): the part of
+    components unrolled), a kernel (n, ptr, idx, X, support, kind, u, F, out, G): the part of
     the neighbour separations that F does not explain, relative to the separations
     themselves [G eq. 26],
         eta_i = sqrt( sum_j W_ij |F_i X_ij - x_ij|^2 / sum_j W_ij |X_ij|^2 ),
@@ -439,7 +442,7 @@ def hourglass_error(dim: int):
     any affine motion; grows with hourglass modes and particle disorder."""
 
     @njit(cache=True, _nrt=False)
-    def kernel(n, ptr, idx, dx, support, kind, u, F, out, G):  # G: 3x3 scratch for F_i - I
+    def kernel(n, ptr, idx, X, support, kind, u, F, out, G):  # G: 3x3 scratch for F_i - I
         for i in range(n):
             for a in range(dim):
                 for b in range(dim):
@@ -448,16 +451,17 @@ def hourglass_error(dim: int):
             den = 0.0
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
+                e0, e1, e2 = separation(X, i, j, dim)
                 r2 = 0.0
                 for a in range(dim):
-                    r2 += dx[p, a] * dx[p, a]
+                    r2 += component(a, e0, e1, e2) * component(a, e0, e1, e2)
                 w = value(kind, math.sqrt(r2), 0.5 * (support[i] + support[j]), dim)
                 for a in range(dim):
                     e = u[j, a] - u[i, a]
                     for b in range(dim):
-                        e -= G[a, b] * dx[p, b]
+                        e -= G[a, b] * component(b, e0, e1, e2)
                     num += w * e * e
-                    den += w * dx[p, a] * dx[p, a]
+                    den += w * component(a, e0, e1, e2) * component(a, e0, e1, e2)
             out[i] = math.sqrt(num / den) if den > 0 else 0.0
 
     return kernel
@@ -564,7 +568,7 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
 
 
 @njit(cache=True, _nrt=False)
-def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
+def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
                          f_visc, heating, step_limit):
     """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
     closing in (v_ij . x_ij < 0),
@@ -577,7 +581,7 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
     alike (Monaghan 1992's du_i/dt = 1/2 sum_j m_j Pi_ij v_ij . grad W_ij): `heating` [W].
     step_limit: at most r / w over the closing pairs, w = -v_ij . x_ij / r the closing speed
     and r = |x_ij| (the time they take to meet at that speed: `stable_time_step`)."""
-    dim = dx.shape[1]
+    dim = X.shape[1]
     for i in range(lo, hi):
         f0 = f1 = f2 = heat = 0.0  # the row's sums, stored once (as in `forces`)
         limit = step_limit[i]
@@ -585,8 +589,9 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, dx, d, v, J, density, gvolu
             j = idx[p]
             approach = 0.0
             r2 = 0.0
+            e0, e1, e2 = separation(X, i, j, dim)
             for a in range(dim):
-                xa = dx[p, a] + d[j, a] - d[i, a]
+                xa = component(a, e0, e1, e2) + d[j, a] - d[i, a]
                 approach += xa * (v[j, a] - v[i, a])
                 r2 += xa * xa
             if approach >= 0.0:

@@ -39,11 +39,10 @@ class ReferencePairs:
     dx: np.ndarray  # (npairs, d) X_j - X_i
     w: np.ndarray  # (npairs,) W(|X_ij|, h_ij)
     h: np.ndarray  # (npairs,) pair support h_ij = (h_i + h_j) / 2
-    g: np.ndarray  # (npairs, d) V_j L_i^-1 w_ij
-    g_rev: np.ndarray  # (npairs, d) g_ji: the same pair seen from j
+    g: np.ndarray  # (npairs, d) V_j L_i^-1 w_ij (the reverse g_ji: g[rev], reverse_values)
     g_sum: np.ndarray  # (rows, d) sum_j g_ij
     condition: np.ndarray  # (rows,) condition number of L_i
-    rev: np.ndarray  # (npairs,) index of the pair (j, i), -1 if j has no row
+    rev: np.ndarray  # (npairs,) 32-bit index of the pair (j, i), -1 if j has no row
     bad: np.ndarray  # rows whose L_i is singular or ill-conditioned (`tolerant`: not raised)
     nearest: np.ndarray  # (rows,) each row's nearest neighbour distance (inf without one)
 
@@ -80,8 +79,8 @@ def _corrected_gradients(ptr, idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum):
 
 def reverse_index(pairs: Relation) -> np.ndarray:
     """For each pair p = (i, j), the index of the pair (j, i) in j's row, or -1 if j has no
-    row."""
-    rev = np.empty(len(pairs.idx), np.int64)
+    row (32-bit)."""
+    rev = np.empty(len(pairs.idx), np.int32)
     _reverse_index(pairs.ptr, pairs.idx, pairs.n_rows, rev)
     return rev
 
@@ -199,10 +198,8 @@ def reference_pairs(
     if has.any():
         nearest[has] = np.minimum.reduceat(dist, pairs.ptr[:-1][has])
     del dist, dwdr
-    rev = reverse_index(pairs)
-    g_rev = reverse_values(g, rev)
-    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_rev=g_rev, g_sum=g_sum, condition=condition,
-                          rev=rev, bad=np.flatnonzero(bad), nearest=nearest)
+    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_sum=g_sum, condition=condition,
+                          rev=reverse_index(pairs), bad=np.flatnonzero(bad), nearest=nearest)
 
 
 class KeptPairs:
