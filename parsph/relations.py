@@ -24,6 +24,8 @@ from numba import njit
 
 from parsph.cells import close_pairs
 
+BLOCK_PAIRS = 1 << 18  # about the pairs whose temporaries a set-up pass holds at once (row_blocks)
+
 
 @dataclass
 class Relation:
@@ -45,6 +47,15 @@ class Relation:
 
     def row_of_pair(self) -> np.ndarray:
         return np.repeat(np.arange(self.n_rows, dtype=np.int64), self.counts())
+
+
+def row_blocks(ptr: np.ndarray, pairs: int) -> list:
+    """(r0, r1) blocks of the CSR rows `ptr`, in order, of about `pairs` pairs each (a row is
+    never split): what a pass whose per-pair temporaries set the peak memory takes at a time."""
+    rows = len(ptr) - 1
+    cuts = np.unique(np.searchsorted(ptr, np.arange(pairs, int(ptr[-1]), pairs), side="right") - 1)
+    cuts = [0] + [int(c) for c in cuts if 0 < c < rows] + [rows]
+    return list(zip(cuts[:-1], cuts[1:]))
 
 
 def find_relation(rows: str, cols: str, x_rows: np.ndarray, x_cols: np.ndarray, gid_cols: np.ndarray,

@@ -14,6 +14,7 @@ from mpi4py import MPI
 from parsph import rigid
 from parsph.errors import InputError, ParsphError
 from parsph.parallel.runtime import collective
+from parsph.relations import BLOCK_PAIRS, row_blocks
 
 
 class StableStep:
@@ -217,10 +218,12 @@ def check_hourglass_stiffness(state, topology) -> None:
         return
     out = np.zeros(n)
     for ref in (r.ref for r in topology.relations if len(r.ref.hgc)):  # the rows of a relation's bodies
-        rows = np.repeat(np.arange(n), np.diff(ref.ptr))
-        with np.errstate(over="ignore", invalid="ignore"):
-            k = ref.hgc * (state.youngs[rows] + state.youngs[ref.idx])
-            out += 2.0 * np.bincount(rows, weights=k, minlength=n) / state.mass[:n]
+        for r0, r1 in row_blocks(ref.ptr, BLOCK_PAIRS):
+            p0, p1 = ref.ptr[r0], ref.ptr[r1]
+            rows = np.repeat(np.arange(r0, r1), np.diff(ref.ptr[r0:r1 + 1]))
+            with np.errstate(over="ignore", invalid="ignore"):
+                k = ref.hgc[p0:p1] * (state.youngs[rows] + state.youngs[ref.idx[p0:p1]])
+                out += 2.0 * np.bincount(rows, weights=k, minlength=n) / state.mass[:n]
     with collective(state.comm):
         bad = np.flatnonzero(~np.isfinite(out))
         if len(bad):

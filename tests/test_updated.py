@@ -374,3 +374,36 @@ def test_compiled_reference_of_an_updated_body_matches_the_total_lagrangian_buil
     M = np.zeros((n, dim, dim))
     np.add.at(M, rows, np.einsum("pa,pb->pab", dx, compiled.g))
     assert np.abs(M - np.eye(dim)).max() < 1e-12
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_reference_data_built_a_block_of_rows_at_a_time_is_the_one_pass_build_to_the_bit(dim, monkeypatch):
+    """The total-Lagrangian build holds its per-pair temporaries a block of rows at a time
+    (relations.row_blocks); the stabilised build, which needs all of them, takes one pass.
+    With blocks of a few pairs, on a disordered block with ghost rows, two bodies (one with
+    hourglass control) and an isolated particle whose correction matrix is singular (listed
+    as bad with `tolerant`), every array is the one-pass build's to the bit."""
+    from parsph import relations
+    from parsph.formulations import reference, tlsph
+
+    spacing = 0.05 if dim == 2 else 0.1
+    X, measure = box([0.0] * dim, [1.0] * dim, spacing)
+    rng = np.random.default_rng(5)
+    X = X + rng.uniform(-0.2, 0.2, X.shape) * spacing
+    X[7] = 5.0  # alone: no neighbours, a singular L
+    gid = rng.permutation(len(X)).astype(np.int64)
+    support = 2.1 * spacing * (1.0 + 0.1 * rng.random(len(X)))
+    n = int(0.8 * len(X))
+    body = (X[:, 0] > 0.5).astype(np.int64)
+    options = [reference.PairOptions(corrected=True, hourglass_form=tlsph.HOURGLASS_PAPER, alpha=50.0),
+               reference.PairOptions(corrected=True, hourglass_form=0, alpha=0.0)]
+    args = (X, measure, measure * 1.1, support, gid, n, len(X), "wendland_c2", body, options, 0.0, True)
+    whole = reference.build(*args, tolerant=True)
+    monkeypatch.setattr(relations, "BLOCK_PAIRS", 7)
+    monkeypatch.setattr("parsph.kernels.correction.BLOCK_PAIRS", 7)
+    blocks = reference.build(*args, tolerant=True)
+    assert len(relations.row_blocks(blocks.ptr, 7)) > 10
+    assert 7 in whole.bad and np.array_equal(whole.bad, blocks.bad)
+    for name in ("ptr", "idx", "g", "g_rev", "g_sum", "hgc", "min_spacing", "stiffening"):
+        assert np.array_equal(getattr(whole, name), getattr(blocks, name)), name
+    assert whole.hgc.any() and not whole.hgc[np.repeat(body[:n], np.diff(whole.ptr)) == 1].any()

@@ -105,20 +105,30 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         pairs = _rows_of(pairs, members[body[:n_rows]])
     if breaks:
         pairs = without(pairs, detached, gid, cut)
-    ref = reference_pairs(X, measure, support, gid, pairs, kernel,
-                          None if corrected.all() else corrected[body[:n_rows]],
-                          None if detached is None else detached[:n_rows], tolerant)
     n = n_owned
     end = int(pairs.ptr[n])
     ptr = pairs.ptr[: n + 1].copy()
     idx = np.ascontiguousarray(pairs.idx[:end], dtype=np.int32)
-    hgc = np.zeros(0)
-    if any(o.hourglass_form for o in options):
-        hgc = np.zeros(end)
-        for b, o in enumerate(options):
-            if o.hourglass_form:
-                tlsph.hourglass_coefficients(o.hourglass_form, ptr, idx, ref.dx, ref.w, ref.h, volume, measure,
-                                             float(o.alpha), body[:n], b, hgc)
+    hourglass = [(b, o) for b, o in enumerate(options) if o.hourglass_form]
+    hgc = np.zeros(end if hourglass else 0)
+
+    def coefficients(r0, r1, p0, p1, dx, w, h):
+        """The hourglass coefficients of the owned rows among rows r0..r1-1 (pairs p0..p1-1)."""
+        r1 = min(r1, n)
+        if r1 > r0:
+            q1 = int(ptr[r1])
+            for b, o in hourglass:
+                tlsph.hourglass_coefficients(o.hourglass_form, ptr[r0:r1 + 1] - p0, idx[p0:q1], dx, w, h,
+                                             volume[r0:r1], measure, float(o.alpha), body[r0:r1], b, hgc[p0:q1])
+
+    # the stabilisation needs every pair's separation and support; else they are made and
+    # used a block of rows at a time (reference_pairs)
+    ref = reference_pairs(X, measure, support, gid, pairs, kernel,
+                          None if corrected.all() else corrected[body[:n_rows]],
+                          None if detached is None else detached[:n_rows], tolerant,
+                          each_block=None if eta > 0 else coefficients)
+    if eta > 0:
+        coefficients(0, n_rows, 0, len(pairs.idx), ref.dx, ref.w, ref.h)
     dim = X.shape[1]
     q = q_rev = np.zeros((0, dim))
     gh = gh_rev = np.zeros(0)
@@ -146,13 +156,14 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     # the per-pair temporaries go before the reverse gradients are gathered: they set the peak memory
-    ref.dx = ref.w = ref.h = None
+    ref.dx = ref.w = ref.h = ref.pairs = pairs = None
     g_rev = reverse_values(ref.g, ref.rev[:end])
     if np.isnan(g_rev).any():
         raise ParsphError("internal: a neighbour of an owned particle has no reference row")
     return ReferenceData(
         ptr=ptr, idx=idx, g=np.ascontiguousarray(ref.g[:end]), g_rev=g_rev, g_sum=np.ascontiguousarray(ref.g_sum[:n]),
-        hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum, gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening, kept=None, bad=ref.bad[ref.bad < n])
+        hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum, gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening,
+        kept=None, bad=ref.bad[ref.bad < n])
 
 
 def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np.ndarray,

@@ -24,7 +24,7 @@ from parsph.errors import InputError
 from parsph.kernels.functions import KERNEL_NAMES, curvature, evaluate, value_and_slope
 from parsph.materials.elastic import det, inverse, right_cauchy_green, symmetric_extremes
 from parsph.neighbors import without
-from parsph.relations import Relation
+from parsph.relations import BLOCK_PAIRS, Relation, row_blocks
 
 # L_i with a larger condition number is refused: the corrected gradient would amplify
 # round-off by that factor.
@@ -33,12 +33,13 @@ MAX_CONDITION = 1e6
 
 @dataclass
 class ReferencePairs:
-    """Per-pair reference data (CSR, aligned with `pairs.idx`)."""
+    """Per-pair reference data (CSR, aligned with `pairs.idx`); dx, w and h are None where
+    reference_pairs handed them to its caller a block at a time."""
 
     pairs: Relation
-    dx: np.ndarray  # (npairs, d) X_j - X_i
-    w: np.ndarray  # (npairs,) W(|X_ij|, h_ij)
-    h: np.ndarray  # (npairs,) pair support h_ij = (h_i + h_j) / 2
+    dx: np.ndarray | None  # (npairs, d) X_j - X_i
+    w: np.ndarray | None  # (npairs,) W(|X_ij|, h_ij)
+    h: np.ndarray | None  # (npairs,) pair support h_ij = (h_i + h_j) / 2
     g: np.ndarray  # (npairs, d) V_j L_i^-1 w_ij (the reverse g_ji: g[rev], reverse_values)
     g_sum: np.ndarray  # (rows, d) sum_j g_ij
     condition: np.ndarray  # (rows,) condition number of L_i
@@ -141,45 +142,68 @@ def reverse_values(values: np.ndarray, rev: np.ndarray) -> np.ndarray:
 def reference_pairs(
     positions: np.ndarray, volume: np.ndarray, support: np.ndarray, gid: np.ndarray,
     pairs: Relation, kernel: str, corrected: np.ndarray | None = None,
-    detached: np.ndarray | None = None, tolerant: bool = False,
+    detached: np.ndarray | None = None, tolerant: bool = False, each_block=None,
 ) -> ReferencePairs:
     """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
     with `corrected` False get the plain SPH gradient g_ij = -V_j w_ij = V_j grad_i W_ij
     (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i; so do the rows
     of `detached` particles (no pairs).
     `tolerant`: singular or ill-conditioned rows are listed in `bad` (with L_i^-1 = -I)
-    instead of raising."""
+    instead of raising.
+    The rows are taken in blocks of about BLOCK_PAIRS pairs, so that the per-pair
+    temporaries (separations, distances, pair supports, kernel values and slopes) are held
+    for one block at a time (each value is the same as from one pass over all pairs). Given
+    `each_block`, it is called as each_block(r0, r1, p0, p1, dx, w, h) with each block's
+    rows r0..r1-1, pairs p0..p1-1 and their temporaries, which are then not kept (dx, w and
+    h of the result are None); without it they are kept for all pairs, in one block."""
     dim = positions.shape[1]
-    rows = pairs.n_rows
-    row = pairs.row_of_pair()
-    dx = positions[pairs.idx] - positions[row]
-    dist = np.sqrt(np.einsum("pa,pa->p", dx, dx))
-    if len(dist) and not np.isfinite(dist).all():
-        p = int(np.flatnonzero(~np.isfinite(dist))[0])
-        raise InputError(f"particles {int(gid[row[p]])} and {int(gid[pairs.idx[p]])} have no finite distance "
-                         f"(a position is not a number)")
-    if len(dist) and not dist.min() > 0.0:
-        p = int(np.argmin(dist))
-        where = ", ".join(f"{c:.6g}" for c in positions[row[p]])
-        raise InputError(f"particles {int(gid[row[p]])} and {int(gid[pairs.idx[p]])} coincide at ({where})")
-    h_pair = 0.5 * (support[row] + support[pairs.idx])
-    del row  # the per-pair temporaries go as soon as they are used: they set the peak memory
-    w, dwdr = evaluate(kernel, dist, h_pair, dim)[:2]
-    L = np.empty((rows, dim, dim))
-    _correction_matrices(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, dim, L)
+    rows, ptr, idx = pairs.n_rows, pairs.ptr, pairs.idx
+    npairs = len(idx)
     counts = pairs.counts()
-    condition = np.full(rows, np.inf)
-    ok = counts > 0
     plain = np.zeros(rows, bool) if corrected is None else ~corrected
     if detached is not None:
         plain |= detached[:rows]
-    ok &= ~plain
+    condition = np.full(rows, np.inf)
     condition[plain] = 1.0
-    _condition_numbers(L, ok, condition, np.empty((3, 3)))
+    g = np.empty((npairs, dim))
+    g_sum = np.empty((rows, dim))
+    nearest = np.full(rows, np.inf)
+    kept = None
+    for r0, r1 in row_blocks(ptr, BLOCK_PAIRS) if each_block is not None else [(0, rows)]:
+        p0, p1 = int(ptr[r0]), int(ptr[r1])
+        block_ptr, block_idx = ptr[r0:r1 + 1] - p0, idx[p0:p1]
+        row = np.repeat(np.arange(r0, r1, dtype=np.int64), counts[r0:r1])
+        dx = positions[block_idx] - positions[row]
+        dist = np.sqrt(np.einsum("pa,pa->p", dx, dx))
+        if len(dist) and not np.isfinite(dist).all():
+            p = int(np.flatnonzero(~np.isfinite(dist))[0])
+            raise InputError(f"particles {int(gid[row[p]])} and {int(gid[block_idx[p]])} have no finite distance "
+                             f"(a position is not a number)")
+        if len(dist) and not dist.min() > 0.0:
+            p = int(np.argmin(dist))
+            where = ", ".join(f"{c:.6g}" for c in positions[row[p]])
+            raise InputError(f"particles {int(gid[row[p]])} and {int(gid[block_idx[p]])} coincide at ({where})")
+        h_pair = 0.5 * (support[row] + support[block_idx])
+        del row  # the per-pair temporaries go as soon as they are used: they set the peak memory
+        w, dwdr = evaluate(kernel, dist, h_pair, dim)[:2]
+        L = np.empty((r1 - r0, dim, dim))
+        _correction_matrices(block_ptr, block_idx, dx, dwdr, dist, volume, dim, L)
+        ok = (counts[r0:r1] > 0) & ~plain[r0:r1]
+        _condition_numbers(L, ok, condition[r0:r1], np.empty((3, 3)))
+        # a singular row takes the plain gradient here; unless `tolerant` the rows are then refused
+        L[plain[r0:r1] | ~(condition[r0:r1] < MAX_CONDITION)] = -np.eye(dim)
+        Linv = np.linalg.inv(L) if r1 > r0 else L
+        _corrected_gradients(block_ptr, block_idx, dx, dwdr, dist, volume, Linv, dim, g[p0:p1], g_sum[r0:r1])
+        has = counts[r0:r1] > 0
+        if has.any():
+            nearest[r0:r1][has] = np.minimum.reduceat(dist, block_ptr[:-1][has])
+        del dist, dwdr
+        if each_block is None:
+            kept = dx, w, h_pair
+        else:
+            each_block(r0, r1, p0, p1, dx, w, h_pair)
     bad = ~(condition < MAX_CONDITION)
-    if tolerant:
-        plain |= bad
-    elif bad.any():
+    if bad.any() and not tolerant:
         first = int(np.flatnonzero(bad)[0])
         where = ", ".join(f"{c:.6g}" for c in positions[first])
         raise InputError(
@@ -188,16 +212,7 @@ def reference_pairs(
             f"{int(bad.sum())} particle(s) affected. Increase kernel.support or kernel.neighbours, "
             "or check for isolated or collinear particles."
         )
-    L[plain] = -np.eye(dim)
-    Linv = np.linalg.inv(L) if rows else L
-    g = np.empty_like(dx)
-    g_sum = np.empty((rows, dim))
-    _corrected_gradients(pairs.ptr, pairs.idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum)
-    nearest = np.full(rows, np.inf)
-    has = counts > 0
-    if has.any():
-        nearest[has] = np.minimum.reduceat(dist, pairs.ptr[:-1][has])
-    del dist, dwdr
+    dx, w, h_pair = kept if kept is not None else (None, None, None)
     return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_sum=g_sum, condition=condition,
                           rev=reverse_index(pairs), bad=np.flatnonzero(bad), nearest=nearest)
 
