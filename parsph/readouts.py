@@ -83,23 +83,28 @@ def cauchy_stress(sim, sel: np.ndarray, full: bool = False) -> np.ndarray:
         F[:, a, a] = 1.0
     P = np.empty_like(F)
     body = sim.state.body[sel]
+    one = len(sim.state.bodies) == 1  # then F and P themselves, no copies (a snapshot's peak memory)
     for b in sim.state.bodies:
-        rows = np.arange(len(sel)) if len(sim.state.bodies) == 1 else np.flatnonzero(body == b.index)
+        rows = np.arange(len(sel)) if one else np.flatnonzero(body == b.index)
         state = np.ascontiguousarray(sim.state.material_state(b)[0][sel[rows]]) if b.law.state else sim.state.no_state
-        part = np.empty_like(F[rows])
-        update.stresses(b.law.law_id, np.ascontiguousarray(F[rows]), d, b.constants.values, state,
-                        state.copy(), part, np.empty(len(rows)), sim.step_dt)
+        Fb = F if one else np.ascontiguousarray(F[rows])
+        part = P if one else np.empty_like(Fb)
+        update.stresses(b.law.law_id, Fb, d, b.constants.values, state, state.copy(), part, np.empty(len(rows)),
+                        sim.step_dt)
         if b.failure:
-            materials.FAILURES[b.failure].stresses(part, np.ascontiguousarray(F[rows]), d,
+            materials.FAILURES[b.failure].stresses(part, Fb, d,
                                                    np.ascontiguousarray(sim.state.damage_state(b)[0][sel[rows]]))
-        P[rows] = part
-    return np.einsum("nab,ncb->nac", P, F) / sim.state.J[sel, None, None]
+        if not one:
+            P[rows] = part
+    sigma = np.einsum("nab,ncb->nac", P, F)
+    sigma /= sim.state.J[sel, None, None]
+    return sigma
 
 
 def von_mises(sim, sel: np.ndarray) -> np.ndarray:
     """sqrt(3/2 s:s) of the full Cauchy stress (out-of-plane components included)."""
-    s = cauchy_stress(sim, sel, full=True)
-    dev = s - np.trace(s, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
+    dev = cauchy_stress(sim, sel, full=True)
+    dev -= np.trace(dev, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
     return np.sqrt(1.5 * np.einsum("nab,nab->n", dev, dev))
 
 
