@@ -206,10 +206,10 @@ def run(scene_path: str, out_dir: str | None, overrides: list, overwrite: bool, 
                             f"{_checkpoint_after_full(outputs.save_checkpoint, out_dir, scene_path, overrides)}")
         error.agreed = True  # every rank met the same (collective) condition and wrote the same
         raise error from None
-    finally:
-        stop.restore()
+    finally:  # a signal while the outputs close (a failing run's too) waits for them to be whole
         progress.close()
         outputs.close()
+        stop.restore()
     loop_seconds = time.perf_counter() - loop_start
     steps = sim.step_count - steps_at_start
     if steps:

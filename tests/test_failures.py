@@ -162,3 +162,27 @@ def test_a_step_far_beyond_the_stable_one_ends_naming_an_inverted_particle(ranks
     assert "Traceback" not in err and err.count("parsph: error") == 1, err
     assert re.search(r"particle \d+ at \(.*\) is inverted \(J = .*\) at step \d+, .*reduce time.dt = 1e-06 s", err), err
     assert seconds < AFTER_FAILURE, f"{seconds} s from the message to the end of the job"
+
+
+def test_a_signal_while_a_failing_run_closes_its_outputs_waits_for_them(tmp_path):
+    """SIGTERM arriving while a failing run closes its outputs (its history's last rows) is
+    held until they are whole: the run ends with its own failure (exit 1, the inverted
+    particle named), not killed by the signal, and its history file reads."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text(BAR)
+    script = ("import os, signal, sys\n"
+              "from parsph.io import outputs\n"
+              "close = outputs.Outputs.close\n"
+              "def signalled(self):\n"
+              "    os.kill(os.getpid(), signal.SIGTERM)\n"
+              "    close(self)\n"
+              "outputs.Outputs.close = signalled\n"
+              "from parsph.cli import main\n"
+              "sys.exit(main(sys.argv[1:]))\n")
+    proc = subprocess.run([sys.executable, "-c", script, "run", str(scene), "--out", str(tmp_path / "out"),
+                           "--quiet", "--set", "time.max_steps=200"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=CEILING)
+    assert proc.returncode == 1, f"exit code {proc.returncode}\nstderr:\n{proc.stderr}"
+    assert len(INVERTED.findall(proc.stderr)) == 1, proc.stderr
+    with h5py.File(tmp_path / "out" / "history.h5", "r") as f:
+        assert len(f["time"]) >= 1 and np.isfinite(f["kinetic_energy"][()]).all()
