@@ -44,14 +44,15 @@ def quadrature(sim) -> tuple:
 def disorder(sim) -> np.ndarray:
     """Hourglass error eta_i of each owned particle (formulations.tlsph.hourglass_error)."""
     error, state = tlsph.hourglass_error(sim.state.dim), sim.state
-    return by_relation(sim, lambda r, out: error(state.n_owned, r.ref.ptr, r.ref.idx, state.reference_positions, state.support,
-                                                 KERNEL_NAMES.index(r.kernel), state.d, state.fs, out, state.scratch33))
+    return by_relation(sim, lambda r, out: error(state.n_owned, r.ref.ptr, r.ref.idx, state.reference_positions,
+                                                 state.support, KERNEL_NAMES.index(r.kernel), state.d, state.fs, out,
+                                                 state.scratch33))
 
 
 def spacing_ratio(sim) -> np.ndarray:
     """Current-configuration disorder of each owned particle (tlsph.spacing_ratio), with the
     ghosts where the last force evaluation saw them."""
-    x = sim.state.Xr + sim.state.d if sim.state.updated else sim.state.X + sim.state.u
+    x = sim.state.reference_positions + sim.state.d  # (d is u itself in the total-Lagrangian case)
     return by_relation(sim, lambda r, out: tlsph.spacing_ratio(sim.state.n_owned, r.ref.ptr, r.ref.idx, x, sim.state.measure,
                                                                sim.state.F, sim.state.dim, out, sim.state.scratch33))
 

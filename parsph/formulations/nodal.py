@@ -199,9 +199,10 @@ class NodalFormulation(Formulation):
         def kinematics_stress():
             ref, a = body.relation.ref, bound(state, fields)
             bad = self.kinematics_stress(
-                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, state.reference_positions, ref.hgc, a["d"], state.volume,
-                state.youngs, body.constants.values, *state.material_state(body), *state.damage_state(body), a["f"],
-                a["fs"], state.F, a["Fr"], state.VP, state.J, state.psi, state.hg_psi, *scratch, running.dt)
+                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, state.reference_positions, ref.hgc, a["d"],
+                state.volume, state.youngs, body.constants.values, *state.material_state(body),
+                *state.damage_state(body), a["f"], a["fs"], state.F, a["Fr"], state.VP, state.J, state.psi,
+                state.hg_psi, *scratch, running.dt)
             if bad >= 0:
                 raise stability.unstable_particle(running, state, bad)
         states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
@@ -228,9 +229,10 @@ class NodalFormulation(Formulation):
         def forces():
             ref, a = body.relation.ref, bound(state, force_fields)
             self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
-                        ref.q_sum, state.reference_positions, ref.hgc, a["d"], a["fs"], a["VP"], a["B"], a["youngs"],
-                        state.volume, state.mass, state.f_int, state.f_hg, running.stable.bound_hourglass, state.omega_hg2,
-                        state.damper_rate2, tensor, a["v"], a["plastic"], state.support, kind, constants)
+                        ref.q_sum, state.reference_positions, ref.hgc, a["d"], a["fs"], a["VP"], a["B"],
+                        a["youngs"], state.volume, state.mass, state.f_int, state.f_hg,
+                        running.stable.bound_hourglass, state.omega_hg2, state.damper_rate2, tensor, a["v"],
+                        a["plastic"], state.support, kind, constants)
         reads = tuple(force_fields[p] for p in force_neighbours)
         out.append(Stage("forces+hourglass" if hourglass else "forces", forces, reads=reads,
                          writes=("f_int", "f_hg", "omega_hg2", "damper_rate2"), force_row=True))
@@ -238,9 +240,10 @@ class NodalFormulation(Formulation):
             def viscosity():
                 ref = body.relation.ref
                 tlsph.artificial_viscosity(
-                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, state.reference_positions, state.d, state.v, state.J,
-                    body.density, state.volume_r if self.updated else state.volume, state.mass, state.support,
-                    body.constants.wave_speed, *self.viscosity, state.f_visc, state.viscous_heating, state.step_limit)
+                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, state.reference_positions, state.d, state.v,
+                    state.J, body.density, state.volume_r if self.updated else state.volume, state.mass,
+                    state.support, body.constants.wave_speed, *self.viscosity, state.f_visc, state.viscous_heating,
+                    state.step_limit)
             out.append(Stage("viscosity", viscosity, reads=("d", "v", "J"), writes=("f_visc", "viscous_heating", "step_limit"),
                              force_row=True))
         return out

@@ -31,11 +31,12 @@ from parsph.relations import Relation
 
 @dataclass
 class ReferenceData:
-    """CSR rows of the owned particles (indices into the rank's local arrays)."""
+    """CSR rows of the owned particles (indices into the rank's local arrays). The pair loops
+    form X_j - X_i from the reference positions (state.RankState.reference_positions), and
+    from it the kernel values and regularising lengths: they are not stored."""
 
     ptr: np.ndarray
-    idx: np.ndarray  # 32-bit neighbour rows (X_j - X_i is formed from the reference positions
-    # by the pair loops, as are the kernel values and regularising lengths)
+    idx: np.ndarray  # 32-bit neighbour rows
     g: np.ndarray
     g_rev: np.ndarray
     g_sum: np.ndarray

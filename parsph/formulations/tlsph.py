@@ -530,8 +530,8 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
     max_i 2 lambda_max(sum_j k_ij n_ij n_ij^T) / m_i, about 1/dim of the scalar sum
     2 sum_j k_ij / m_i on a disordered lattice (the same in 1D). r_d^2 (damper_rate2, empty
     without MACHDYN's viscous hourglass force) bounds its dampers' rate the same way, written
-    by the forces stage; k does not scale it (a damper's limit 2 / r_d is not the springs'). The strain max |ln s| over
-    the principal stretches of fs is the distortion measure of the adaptive reference
+    by the forces stage; k does not scale it (a damper's limit 2 / r_d is not the springs').
+    The strain max |ln s| over the principal stretches of fs is the distortion measure of the adaptive reference
     update. omega_c^2 (omega_c2, empty without contact) bounds the contact springs the same
     way (parsph.contact). `step_limit` (empty without artificial viscosity or contact) caps
     a particle's step by its motion: no pair closing in faster than by its separation in a
