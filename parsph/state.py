@@ -71,6 +71,7 @@ WORK = (
     Work("f", "local", "tensor", "hessian"),  # Hessian-stabilised gradient [V eq. 39]
     Work("B", "local", "tensor", "hessian"),  # its correction
     Work("VP", "local", "tensor"),  # volume times first Piola-Kirchhoff stress
+    Work("S", "local", "tensor", "corrected_stress"),  # VP L^-1 / V, the force row's (formulations.tlsph)
     Work("J", "local", fill=1.0),  # det F
     Work("psi", "local"),  # strain energy density
     Work("no_state", "local", "none"),  # the state of a law without one
@@ -130,6 +131,7 @@ class RankState:
         self.needs = {"hessian": self.eta > 0, "hourglass": self.hourglass, "viscous": self.viscous,
                       "damped": any(f.damped for f in forms),
                       "variational": any(f.hourglass_penalty for f in forms),
+                      "corrected_stress": any(f.corrected_stress for f in forms) or self.eta > 0,
                       "limited": self.viscous or limited}
         # the formulations, laws and their states, the updated reference and damage the bodies use
         self.owners = {f.type for f in forms} | {b.law.name for b in bodies} | {b.law.state for b in bodies}
@@ -182,7 +184,7 @@ class RankState:
         self.youngs = np.array([b.constants.youngs for b in self.bodies])[self.body]
         arrays = dict(X=self.X, measure=self.measure, volume=self.volume, mass=self.mass, support=self.support,
                       groups=fl["groups"][:keep], u=self.u, v=self.v, d=self.d, F=self.F, fs=self.fs, f=self.f,
-                      B=self.B, VP=self.VP, J=self.J, psi=self.psi, youngs=self.youngs, **extra)
+                      B=self.B, VP=self.VP, S=self.S, J=self.J, psi=self.psi, youngs=self.youngs, **extra)
         if self.updated:
             arrays.update(Xr=self.Xr, Fr=self.Fr, measure_r=self.measure_r, volume_r=self.volume_r)
         self.particles = PointSet("particles", self.gid, n, decomp, self.carried, arrays)
@@ -210,6 +212,12 @@ class RankState:
         """The positions the kernel relations' reference data were built at: X, or X^r when a
         reference moves (the pair loops form X_j - X_i from them)."""
         return self.Xr if self.updated else self.X
+
+    @property
+    def reference_measure(self) -> np.ndarray:
+        """The measures the kernel relations' reference data were built with: the measure,
+        or measure_r when a reference moves."""
+        return self.measure_r if self.updated else self.measure
 
     def reference_shift(self) -> np.ndarray:
         """X^r - X, from which d = u - shift. An Eulerian kernel takes u itself where

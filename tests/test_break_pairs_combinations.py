@@ -58,8 +58,8 @@ def assert_broken(sim) -> None:
     assert ref.kept is not None or not sim.state.updated
     np.testing.assert_array_equal(ref.ptr, searched.ptr)
     np.testing.assert_array_equal(ref.idx, searched.idx)
-    np.testing.assert_allclose(ref.g, searched.g, rtol=0, atol=1e-9 * np.abs(searched.g).max())
-    np.testing.assert_allclose(ref.g_rev, searched.g_rev, rtol=0, atol=1e-9 * np.abs(searched.g).max())
+    np.testing.assert_allclose(ref.gw, searched.gw, rtol=0, atol=1e-9 * np.abs(searched.gw).max())
+    np.testing.assert_allclose(ref.Linv, searched.Linv, rtol=0, atol=1e-9 * np.abs(searched.Linv).max())
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -101,7 +101,7 @@ def test_kept_lists_and_the_search_leave_out_the_same_broken_pairs(dim):
         np.testing.assert_array_equal(searched.ptr, compiled.ptr)
         np.testing.assert_array_equal(searched.idx, compiled.idx)
         np.testing.assert_array_equal(searched.bad, compiled.bad)
-        for name in ("g", "g_rev", "g_sum", "hgc"):
+        for name in ("gw", "gw_sum", "Linv", "hgc"):
             a, b = getattr(searched, name), getattr(compiled, name)
             assert np.abs(a - b).max() <= 1e-11 * np.abs(a).max(), name
     assert lone in searched.bad and len(searched.idx) < len(whole.idx) - len(cut) // 2

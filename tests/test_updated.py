@@ -359,7 +359,7 @@ def test_compiled_reference_of_an_updated_body_matches_the_total_lagrangian_buil
     numpy_build, compiled = reference.build(*args), reference.build(*args, skin=0.0)
     assert compiled.kept is not None and numpy_build.kept is None
     assert np.array_equal(numpy_build.ptr, compiled.ptr) and np.array_equal(numpy_build.idx, compiled.idx)
-    for name in ("g", "g_rev", "g_sum", "hgc", "q", "q_rev", "q_sum", "gh", "gh_rev", "min_spacing",
+    for name in ("gw", "gw_sum", "Linv", "hgc", "q", "q_rev", "q_sum", "gh", "gh_rev", "min_spacing",
                  "stiffening"):
         a, b = getattr(numpy_build, name), getattr(compiled, name)
         assert a.shape == b.shape, name
@@ -372,7 +372,7 @@ def test_compiled_reference_of_an_updated_body_matches_the_total_lagrangian_buil
     # the builder's separations are the pair loops' X_j - X_i to the bit (they form it, not store it)
     assert np.array_equal(compiled.kept.dx[: len(dx)], dx)
     M = np.zeros((n, dim, dim))
-    np.add.at(M, rows, np.einsum("pa,pb->pab", dx, compiled.g))
+    np.add.at(M, rows, np.einsum("pa,pb->pab", dx, np.einsum("pab,pb->pa", compiled.Linv[rows], compiled.gw)))
     assert np.abs(M - np.eye(dim)).max() < 1e-12
 
 
@@ -404,6 +404,6 @@ def test_reference_data_built_a_block_of_rows_at_a_time_is_the_one_pass_build_to
     blocks = reference.build(*args, tolerant=True)
     assert len(relations.row_blocks(blocks.ptr, 7)) > 10
     assert 7 in whole.bad and np.array_equal(whole.bad, blocks.bad)
-    for name in ("ptr", "idx", "g", "g_rev", "g_sum", "hgc", "min_spacing", "stiffening"):
+    for name in ("ptr", "idx", "gw", "gw_sum", "Linv", "hgc", "min_spacing", "stiffening"):
         assert np.array_equal(getattr(whole, name), getattr(blocks, name)), name
     assert whole.hgc.any() and not whole.hgc[np.repeat(body[:n], np.diff(whole.ptr)) == 1].any()

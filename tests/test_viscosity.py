@@ -22,10 +22,11 @@ def pair_forces(v_j: np.ndarray) -> tuple:
     idx = np.array([1, 0])
     X = np.array([[0.0, 0.0], [1e-3, 0.0]])  # the reference positions: X_j - X_i = +-1 mm along x
     grad = np.array([[2.0, 0.0], [-2.0, 0.0]])  # g_ij along x_j - x_i (as F = I + sum (u_j - u_i) g_ij)
+    Linv = np.tile(np.eye(2), (2, 1, 1))  # g_ij = L_i^-1 gw_ij: uncorrected, so g_ji = -g_ij (equal measures)
     v = np.array([[0.0, 0.0], v_j])
     mass, volume = np.array([1e-3, 2e-3]), np.array([1e-6, 1e-6])
     out, heating, limit = np.zeros((2, 2)), np.zeros(2), np.full(2, np.inf)
-    artificial_viscosity(0, 2, ptr, idx, grad, grad[::-1].copy(), X, np.zeros((2, 2)), v, np.ones(2), 1000.0,
+    artificial_viscosity(0, 2, ptr, idx, grad, Linv, np.ones(2), X, np.zeros((2, 2)), v, np.ones(2), 1000.0,
                          volume, mass, np.full(2, 2.1e-3), 50.0, 1.0, 2.0, out, heating, limit)
     return out, heating, limit
 

@@ -68,6 +68,7 @@ class Formulation(ABC):
     viscous = False  # it adds Monaghan's artificial viscosity
     damped = False  # a yielded pair takes MACHDYN's viscous hourglass force: its dampers bound the step
     eta = 0.0  # Hessian's-difference stabilisation [V eq. 17]: 0 without
+    corrected_stress = False  # its force row reads S = V P L^-1 / V at the neighbours (formulations.tlsph)
     weighted_hessian = True  # the Hessian's linear correction weighted by the kernel (with eta > 0)
     update_every = 0  # steps between reference updates (1 with an Eulerian kernel; 0: not by count)
     update_strain = 0.0  # the log strain since the reference that updates it (0: not by strain)

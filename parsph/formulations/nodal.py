@@ -126,6 +126,7 @@ class NodalFormulation(Formulation):
         self.update_every, self.update_strain = (1, 0.0) if self.eulerian else \
             (options["update_every"], options["update_strain"])
         force = "rlm" if self.type == "rlm" else options["force_form"]
+        self.corrected_stress = force != "rlm"  # its force row reads S = V P L^-1 / V (formulations.tlsph)
         reference = tlsph.REFERENCE_CURRENT if self.eulerian else \
             tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
         viscous = self.absorbs_hourglass_work and self.plastic_hourglass == "viscous"
@@ -188,7 +189,7 @@ class NodalFormulation(Formulation):
         if hessian:
             def gradient():
                 ref = body.relation.ref
-                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.g, state.d, state.f)
+                self.gradient(body.lo, body.hi, ref.ptr, ref.idx, ref.gw, ref.Linv, state.d, state.f)
             out.append(Stage("kinematics+stress", gradient, reads=("d",), writes=("f",)))
 
         # the parameters the kernels read at neighbours as their compile-time switches decide,
@@ -199,38 +200,46 @@ class NodalFormulation(Formulation):
         def kinematics_stress():
             ref, a = body.relation.ref, bound(state, fields)
             bad = self.kinematics_stress(
-                body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.q, ref.gh, state.reference_positions, ref.hgc, a["d"],
-                state.volume, state.youngs, body.constants.values, *state.material_state(body),
-                *state.damage_state(body), a["f"], a["fs"], state.F, a["Fr"], state.VP, state.J, state.psi,
-                state.hg_psi, *scratch, running.dt)
+                body.lo, body.hi, ref.ptr, ref.idx, ref.gw, ref.Linv, state.reference_measure, ref.q, ref.gh,
+                state.reference_positions, ref.hgc, a["d"], state.volume, state.youngs, body.constants.values,
+                *state.material_state(body), *state.damage_state(body), a["f"], a["fs"], state.F, a["Fr"], state.VP,
+                state.S, state.J, state.psi, state.hg_psi, *scratch, running.dt)
             if bad >= 0:
                 raise stability.unstable_particle(running, state, bad)
         states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
                        if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
+        corrects = self.corrected_stress and not hessian and not self.eulerian  # it forms the force row's S
         out.append(Stage("kinematics+stress", kinematics_stress, reads=tuple(fields[p] for p in neighbours),
-                         writes=("fs", "F", "VP", "J", "psi", "hg_psi") + trials))
+                         writes=("fs", "F", "VP", "J", "psi", "hg_psi") + (("S",) if corrects else ()) + trials))
         if hessian:
             def hessian_transpose():
                 ref = body.relation.ref
-                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, state.VP, state.B)
-            out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B",), force_row=True))
+                self.hessian_transpose(body.lo, body.hi, ref.ptr, ref.idx, ref.gh, ref.gh_rev, state.VP, state.B,
+                                       ref.Linv, state.reference_measure, state.S)
+            out.append(Stage("forces", hessian_transpose, reads=("VP",), writes=("B", "S"), force_row=True))
+        elif self.corrected_stress and self.eulerian:  # S in the reference the forces use, once it has moved
+            def corrected_stresses():
+                tlsph.corrected_stresses(body.lo, body.hi, state.VP, body.relation.ref.Linv, state.reference_measure,
+                                         state.S)
+            out.append(Stage("forces", corrected_stresses, writes=("S",), force_row=True))
 
         # MACHDYN's viscous hourglass force: alpha, the wave speed, density, E, the plastic strain's column
         constants = np.array([self.alpha, body.constants.wave_speed, body.density, body.constants.youngs,
                               body.law.plastic.strain if viscous else 0], float)
         kind = KERNEL_NAMES.index(body.relation.kernel)
 
-        force_fields = dict(d="d", fs=motion, VP="VP", B="B", youngs="youngs", v="v",
+        force_fields = dict(d="d", fs=motion, VP="VP", S="S", youngs="youngs", v="v",
                             plastic=body.law.state + "_trial" if viscous else "no_state")
-        force_neighbours = ("VP",) + (("d", "fs", "youngs") if hourglass else ()) + (("B",) if hessian else ()) + \
-            (("v", "plastic") if viscous else ())
+        # the stress at the neighbours: S (pair and virtual-work rows), V P (RLM's row, the q terms)
+        stress = (("S",) if self.corrected_stress else ()) + (("VP",) if hessian or not self.corrected_stress else ())
+        force_neighbours = stress + (("d", "fs", "youngs") if hourglass else ()) + (("v", "plastic") if viscous else ())
 
         def forces():
             ref, a = body.relation.ref, bound(state, force_fields)
-            self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, ref.g_sum, ref.q, ref.q_rev,
-                        ref.q_sum, state.reference_positions, ref.hgc, a["d"], a["fs"], a["VP"], a["B"],
-                        a["youngs"], state.volume, state.mass, state.f_int, state.f_hg,
+            self.forces(body.lo, body.hi, ref.ptr, ref.idx, ref.gw, ref.gw_sum, ref.Linv, state.reference_measure,
+                        ref.q, ref.q_rev, ref.q_sum, state.reference_positions, ref.hgc, a["d"], a["fs"], a["VP"],
+                        a["S"], a["youngs"], state.volume, state.mass, state.f_int, state.f_hg,
                         running.stable.bound_hourglass, state.omega_hg2, state.damper_rate2, tensor, a["v"],
                         a["plastic"], state.support, kind, constants)
         reads = tuple(force_fields[p] for p in force_neighbours)
@@ -240,7 +249,8 @@ class NodalFormulation(Formulation):
             def viscosity():
                 ref = body.relation.ref
                 tlsph.artificial_viscosity(
-                    body.lo, body.hi, ref.ptr, ref.idx, ref.g, ref.g_rev, state.reference_positions, state.d, state.v,
+                    body.lo, body.hi, ref.ptr, ref.idx, ref.gw, ref.Linv, state.reference_measure,
+                    state.reference_positions, state.d, state.v,
                     state.J, body.density, state.volume_r if self.updated else state.volume, state.mass,
                     state.support, body.constants.wave_speed, *self.viscosity, state.f_visc, state.viscous_heating,
                     state.step_limit)

@@ -1,9 +1,10 @@
 """The per-pair data of a reference configuration that the compiled stages read.
 
 Built once in the total-Lagrangian formulation and again at every update of the reference
-in the updated one [V §3.1]: neighbours (neighbors.find_pairs), corrected gradients
-g_ij = V_j L_i^-1 grad W [V eq. 13] with their reverse g_ji and row sums, hourglass
-coefficients [G eq. 31], and for Hessian's-difference stabilisation [V eq. 17, 21]
+in the updated one [V §3.1]: neighbours (neighbors.find_pairs), the corrected gradients
+g_ij = V_j L_i^-1 grad W [V eq. 13] as the weighted kernel gradients gw_ij = V_j grad W with
+their row sums and L_i^-1 of each row (kernels.correction), hourglass coefficients
+[G eq. 31], and for Hessian's-difference stabilisation [V eq. 17, 21]
 
     q_ij  = eta Hc_ij h_i        (corrected kernel Hessian times the vector h, kernels.hessian,
                                   its A term weighted by the kernel unless `weighted_hessian` is off)
@@ -23,7 +24,7 @@ import numpy as np
 
 from parsph.errors import ParsphError
 from parsph.formulations import tlsph
-from parsph.kernels.correction import KeptPairs, reference_pairs, reverse_values
+from parsph.kernels.correction import KeptPairs, reference_pairs, reverse_index, reverse_values
 from parsph.kernels.hessian import corrected_hessians
 from parsph.neighbors import find_pairs, within_bodies, without
 from parsph.relations import Relation
@@ -33,13 +34,15 @@ from parsph.relations import Relation
 class ReferenceData:
     """CSR rows of the owned particles (indices into the rank's local arrays). The pair loops
     form X_j - X_i from the reference positions (state.RankState.reference_positions), and
-    from it the kernel values and regularising lengths: they are not stored."""
+    from it the kernel values and regularising lengths: they are not stored. Nor are the
+    corrected gradients: g_ij = L_i^-1 gw_ij, and the reverse g_ji = -(V_i / V_j) L_j^-1 gw_ij
+    (V the reference measures, state.RankState.reference_measure)."""
 
     ptr: np.ndarray
     idx: np.ndarray  # 32-bit neighbour rows
-    g: np.ndarray
-    g_rev: np.ndarray
-    g_sum: np.ndarray
+    gw: np.ndarray  # V_j w_ij per pair
+    gw_sum: np.ndarray  # its row sums
+    Linv: np.ndarray  # L_i^-1 of the owned and ghost rows
     hgc: np.ndarray  # hourglass coefficients c_ij (empty without hourglass control)
     q: np.ndarray  # Hessian stabilisation (empty when eta = 0)
     q_rev: np.ndarray
@@ -72,7 +75,8 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
           detached: np.ndarray | None = None, cut: np.ndarray | None = None,
           tolerant: bool = False) -> ReferenceData:
     """Reference data for rows 0..n_owned-1 of the local particles; rows up to n_rows (owned
-    and layer-1 ghosts) are built to provide the reverse coefficients g_ji. `body` is each
+    and layer-1 ghosts) are built to provide the ghosts' L_j^-1 and the stabilisation's
+    reverse coefficients. `body` is each
     local particle's body index and options[b] its body's PairOptions, or None for a body
     whose rows are left empty (another kernel relation holds them); particles of
     different bodies are not neighbours, nor are `detached` ones (a bool per local particle:
@@ -140,8 +144,9 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
         row_all = pairs.row_of_pair()
         Hc = corrected_hessians(pairs, ref.dx, ref.h, measure, gid, kernel, weighted_hessian)
         q_all = eta * hvec[row_all, None] * np.einsum("pab->pa", Hc)
-        gh_all = eta * hvec[row_all] * np.einsum("pa->p", ref.g)
-        rev = ref.rev[:end]
+        g = np.einsum("pab,pb->pa", ref.Linv[row_all], ref.gw)
+        gh_all = eta * hvec[row_all] * np.einsum("pa->p", g)
+        rev = reverse_index(pairs)[:end]
         q, gh = np.ascontiguousarray(q_all[:end]), np.ascontiguousarray(gh_all[:end])
         q_rev, gh_rev = reverse_values(q_all, rev), reverse_values(gh_all, rev)
         q_sum = np.stack([np.bincount(rows, q[:, a], n) for a in range(dim)], axis=1)
@@ -150,20 +155,17 @@ def build(X, measure, volume, support, gid, n_owned: int, n_rows: int, kernel: s
     if eta > 0 and end:
         # the stabilised gradient g + q - gh (sum g) against g, row by row: the fastest mode's
         # frequency grows with up to its 3/4 power (measured: bar, cylinder, punch, rings)
-        size_g = np.bincount(rows, np.sqrt(np.einsum("pa,pa->p", ref.g[:end], ref.g[:end])), n)
+        size_g = np.bincount(rows, np.sqrt(np.einsum("pa,pa->p", g[:end], g[:end])), n)
         size_q = np.bincount(rows, np.sqrt(np.einsum("pa,pa->p", q, q)), n)
         size_gh = np.bincount(rows, np.abs(gh), n)
         has_g = size_g > 0
         stiffening[has_g] = 1.0 + (size_q[has_g] + size_gh[has_g] * size_g[has_g]) / size_g[has_g]
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
-    # the per-pair temporaries go before the reverse gradients are gathered: they set the peak memory
-    ref.dx = ref.w = ref.h = ref.pairs = pairs = None
-    g_rev = reverse_values(ref.g, ref.rev[:end])
-    if np.isnan(g_rev).any():
+    if (idx >= n_rows).any():
         raise ParsphError("internal: a neighbour of an owned particle has no reference row")
     return ReferenceData(
-        ptr=ptr, idx=idx, g=np.ascontiguousarray(ref.g[:end]), g_rev=g_rev, g_sum=np.ascontiguousarray(ref.g_sum[:n]),
-        hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum, gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening,
+        ptr=ptr, idx=idx, gw=np.ascontiguousarray(ref.gw[:end]), gw_sum=np.ascontiguousarray(ref.gw_sum[:n]),
+        Linv=ref.Linv, hgc=hgc, q=q, q_rev=q_rev, q_sum=q_sum, gh=gh, gh_rev=gh_rev, min_spacing=min_spacing, stiffening=stiffening,
         kept=None, bad=ref.bad[ref.bad < n])
 
 
@@ -188,7 +190,7 @@ def _rebuilt(kept: KeptPairs, X, measure, volume, support, gid, n: int, body: np
     if stabilised:
         stiffening[~np.array([o.stabilised for o in options])[body[:n]]] = 1.0  # the bodies without it
     return ReferenceData(
-        ptr=ptr, idx=idx, g=kept.g[:end], g_rev=kept.g_rev[:end], g_sum=kept.g_sum[:n], hgc=hgc,
+        ptr=ptr, idx=idx, gw=kept.gw[:end], gw_sum=kept.gw_sum[:n], Linv=kept.Linv, hgc=hgc,
         q=kept.q[:end] if stabilised else np.zeros((0, dim)),
         q_rev=kept.q_rev[:end] if stabilised else np.zeros((0, dim)),
         q_sum=kept.q_sum[:n] if stabilised else np.zeros((0, dim)), gh=kept.gh[:end] if stabilised else np.zeros(0),

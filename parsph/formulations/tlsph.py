@@ -4,24 +4,31 @@ Quantities are measured from the reference configuration X^r: the initial one in
 total-Lagrangian formulation (F^r = I), the last updated one in the updated formulation
 [V §3.1]; d = x - X^r is the displacement since the reference.
 
+The corrected gradient g_ij = V_j L_i^-1 w_ij (kernels.correction) enters as the stored
+gw_ij = V_j w_ij with L_i^-1 applied per particle: w_ij is antisymmetric, so
+g_ji = -(V_i / V_j) L_j^-1 gw_ij (V the reference measures), and no reverse is stored.
+
 Stage 1, `kinematics_stress`: for each owned particle
-    f_i = I + sum_j (d_j - d_i) (x) g_ij                      [G eq. 17], [V eq. 12]
+    f_i = I + sum_j (d_j - d_i) (x) g_ij = I + (sum_j (d_j - d_i) (x) gw_ij) L_i^-T
+                                                              [G eq. 17], [V eq. 12]
     optionally stabilised by Hessian's difference [V eq. 17, 21]:
     f_i^s = f_i + eta sum_j [(d_j - d_i) (x) Hc_ij h - (f_j - f_i) (g_ij . h)]
     (f of the neighbours comes from the extra pass `gradient` and a halo refresh)
     F_i = f_i^s F^r_i,  P_i = P(F_i), psi_i                   (materials.update)
-and the stored product VP_i = V^0_i P_i F^rT_i [V eq. 14] that stage 2 reads; with an
-Eulerian kernel, whose reference moves to the current configuration between the stages,
-VP_i = V^0_i P_i F_i^T = V_i sigma_i, the same product in the new reference.
+and the stored product VP_i = V^0_i P_i F^rT_i [V eq. 14]; with an Eulerian kernel, whose
+reference moves to the current configuration between the stages, VP_i = V^0_i P_i F_i^T =
+V_i sigma_i, the same product in the new reference. Stage 2 reads it through
+S_i = VP_i L_i^-1 / V_i (with Hessian stabilisation (VP_i - B_i) L_i^-1 / V_i).
 
 Stage 2, `forces`: the internal force in one of two forms,
-    pair form [G eq. 24]:   f_i = sum_j (V_i P_i g_ij - V_j P_j g_ji)
-    virtual work [V eq. 11]: f_i = -sum_{j in S_i + {i}} V_j P_j G_i(X_j),
+    pair form [G eq. 24]:   f_i = sum_j (V_i P_i g_ij - V_j P_j g_ji) = V_i sum_j (S_i + S_j) gw_ij
+    virtual work [V eq. 11]: f_i = -sum_{j in S_i + {i}} V_j P_j G_i(X_j)
+                                 = V_i (S_i sum_j gw_ij + sum_j S_j gw_ij),
         with G_i(X_j) = g_ji and the self coefficient G_i(X_i) = -sum_k g_ik,
-which agree in exact arithmetic when F uses the symmetrised corrected gradient (they
-differ by summation order only); both conserve linear momentum. With Hessian
-stabilisation the forces are the exact transpose of f^s: V P - B with g plus V P with
-eta Hc h, B from `hessian_transpose` (so energy is conserved between updates).
+which agree in exact arithmetic (they differ by summation order only); both conserve
+linear momentum. With Hessian stabilisation the forces are the exact transpose of f^s:
+V P - B with g plus V P with eta Hc h, B from `hessian_transpose` (so energy is conserved
+between updates).
 
 Hourglass control penalises the error e^i_ij = F_i X_ij - x_ij, the part of the neighbour
 separation that F does not explain [G eq. 25-26]:
@@ -99,7 +106,10 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
     stabilisation.
     """
     gradient, hessian_transpose = _hessian_passes(dim)
-    kinematics_stress = _stress_stage(dim, law, hourglass == HOURGLASS_VARIATIONAL, reference, hessian, failure)
+    # S is formed with the stress unless the stabilisation's B enters it (`hessian_transpose`) or
+    # the reference moves between the stages (`corrected_stresses`, once it has moved)
+    kinematics_stress = _stress_stage(dim, law, hourglass == HOURGLASS_VARIATIONAL, reference, hessian, failure,
+                                      force_form != FORCE_RLM and not hessian and reference != REFERENCE_CURRENT)
     forces = _force_stage(dim, force_form, hourglass, hessian, viscous)
     return gradient, kinematics_stress, hessian_transpose, forces
 
@@ -108,15 +118,16 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
 def _hessian_passes(dim: int):
     """(gradient, hessian_transpose): the extra passes of Hessian's-difference stabilisation."""
     @njit(cache=True, _nrt=False)
-    def gradient(lo, hi, ptr, idx, g, d, f):
+    def gradient(lo, hi, ptr, idx, gw, Linv, d, f):
         """f_i = I + sum_j (d_j - d_i) (x) g_ij for particles lo..hi-1 [V eq. 12]."""
         for i in range(lo, hi):
-            gradient_row(dim, i, i, ptr, idx, g, d, f)
+            corrected_gradient_row(dim, i, ptr, idx, gw, Linv, d, f)
 
     @njit(cache=True, _nrt=False)
-    def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B):
+    def hessian_transpose(lo, hi, ptr, idx, gh, gh_rev, VP, B, Linv, measure, S):
         """B_i = sum_j (V P_j gh_ji - V P_i gh_ij): what the gradient-of-gradient term of
-        [V eq. 21] feeds back into the forces."""
+        [V eq. 21] feeds back into the forces; and S_i = (VP_i - B_i) L_i^-1 / V_i, which
+        the force row reads."""
         for i in range(lo, hi):
             for a in range(dim):
                 for b in range(dim):
@@ -126,21 +137,24 @@ def _hessian_passes(dim: int):
                 for a in range(dim):
                     for b in range(dim):
                         B[i, a, b] += VP[j, a, b] * gh_rev[p] - VP[i, a, b] * gh[p]
+            corrected_stress(dim, i, VP, B, True, Linv, measure, S)
 
     variant = f"{COMPILED_SOURCE} {dim}"
     return CompiledOnce(gradient, variant), CompiledOnce(hessian_transpose, variant)
 
 
 @functools.lru_cache(maxsize=None)
-def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian: bool, failure: int):
+def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian: bool, failure: int,
+                  corrects: bool):
     """kinematics_stress, stage 1, for its switches (`variational`: the variational hourglass
-    form's penalty and hourglass stress)."""
+    form's penalty and hourglass stress; `corrects`: it forms the force row's S)."""
     @njit(cache=True, _nrt=False)
-    def kinematics_stress(lo, hi, ptr, idx, g, q, gh, X, hgc, d, volume, youngs, c, state, trial, damage_state,
-                          damage_trial, f, fs, F, Fr, VP, J, psi, hg_psi, P, work, err, dt):
+    def kinematics_stress(lo, hi, ptr, idx, gw, Linv, measure, q, gh, X, hgc, d, volume, youngs, c, state, trial,
+                          damage_state, damage_trial, f, fs, F, Fr, VP, S, J, psi, hg_psi, P, work, err, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
-        new material and damage state (trial, damage_trial) and (variational form)
-        hourglass penalty hg_psi; returns the first inverted particle or -1."""
+        new material and damage state (trial, damage_trial), (variational form) hourglass
+        penalty hg_psi and (`corrects`) S_i = VP_i L_i^-1 / V_i; returns the first inverted
+        particle or -1."""
         first_bad = -1
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
@@ -157,7 +171,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                     for b in range(dim):
                         fs[i, a, b] = component(b, s0, s1, s2)
             else:
-                gradient_row(dim, i, i, ptr, idx, g, d, fs)
+                corrected_gradient_row(dim, i, ptr, idx, gw, Linv, d, fs)
             if stress_at(dim, law, reference, failure, i, fs, Fr, volume[i], c, state, trial, damage_state,
                          damage_trial, P, work, F, VP, J, psi, dt) and first_bad < 0:
                 first_bad = i
@@ -180,16 +194,19 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                         for b in range(dim):
                             VP[i, a, b] += k * err[a] * component(b, e0, e1, e2)
                 hg_psi[i] = phi
+            if corrects:
+                corrected_stress(dim, i, VP, VP, False, Linv, measure, S)
         return first_bad
 
-    return CompiledOnce(kinematics_stress, f"{COMPILED_SOURCE} {dim} {law} {variational} {reference} {hessian} {failure}")
+    return CompiledOnce(kinematics_stress,
+                        f"{COMPILED_SOURCE} {dim} {law} {variational} {reference} {hessian} {failure} {corrects}")
 
 
 @functools.lru_cache(maxsize=None)
 def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, viscous: bool):
     """forces, stage 2, for its switches."""
     @njit(cache=True, _nrt=False)
-    def forces(lo, hi, ptr, idx, g, g_rev, g_sum, q, q_rev, q_sum, X, hgc, d, fs, VP, B, youngs,
+    def forces(lo, hi, ptr, idx, gw, gw_sum, Linv, measure, q, q_rev, q_sum, X, hgc, d, fs, VP, S, youngs,
                volume, mass, f_int, f_hg, bound, omega_hg2, damper_rate2, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
         `bound`: the stable step is due) the bound omega_hg2 on the hourglass springs'
@@ -210,51 +227,56 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
         (the springs' argument); its square goes to damper_rate2. Pairs not yet past the onset
         count too (their e at least its floor): a damper that switches on within a step is then
         stable in it (at an impact the first yield comes in the first step, sized before it). With
-        Hessian stabilisation the force is the standard one for V P - B with g plus the
-        standard one for V P with q (the transpose of [V eq. 21]). The RLM row [R Table 1,
-        its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the corrected g_ij it
-        uses particle i's correction for both terms and does not conserve linear momentum."""
+        Hessian stabilisation the force is the standard one for V P - B with g (through S)
+        plus the standard one for V P with q (the transpose of [V eq. 21]). The RLM row
+        [R Table 1, its printed sign corrected] is f_i = V_i sum_j (P_i + P_j) g_ij: with the
+        corrected g_ij it uses particle i's correction for both terms and does not conserve
+        linear momentum."""
         pair_form = force_form == FORCE_PAIR
         for i in range(lo, hi):
             # the row's sums are kept in locals, (f0, f1, f2) of f_int, (h0, h1, h2) of f_hg and
             # the spring and damper tensors (k*, c*: xx, yy, zz, xy, yz, xz), and stored once:
             # the pair loop stores nothing, so the compiler keeps them and particle i's data in
             # registers (the sums are the same, term by term in row order)
-            f0 = f1 = f2 = h0 = h1 = h2 = 0.0
+            # (f0, f1, f2): the S terms, times V_i when stored; (t0, t1, t2): the q terms
+            f0 = f1 = f2 = h0 = h1 = h2 = t0 = t1 = t2 = 0.0
             k0 = k1 = k2 = k3 = k4 = k5 = 0.0
             c0 = c1 = c2 = c3 = c4 = c5 = 0.0
             damped = False
             if force_form == FORCE_VIRTUAL_WORK:
                 for a in range(dim):
-                    s = 0.0
+                    s = t = 0.0
                     for b in range(dim):
+                        s += S[i, a, b] * gw_sum[i, b]
                         if hessian:
-                            s += (VP[i, a, b] - B[i, a, b]) * g_sum[i, b] + VP[i, a, b] * q_sum[i, b]
-                        else:
-                            s += VP[i, a, b] * g_sum[i, b]
+                            t += VP[i, a, b] * q_sum[i, b]
                     f0, f1, f2 = replaced(a, s, f0, f1, f2)
+                    t0, t1, t2 = replaced(a, t, t0, t1, t2)
             for p in range(ptr[i], ptr[i + 1]):
                 j = idx[p]
                 if force_form == FORCE_RLM:
                     ratio = volume[i] / volume[j]
+                    g0, g1, g2 = corrected_gradient(dim, Linv, i, gw, p)
                     for a in range(dim):
                         s = 0.0
                         for b in range(dim):
-                            s += (VP[i, a, b] + ratio * VP[j, a, b]) * g[p, b]
+                            s += (VP[i, a, b] + ratio * VP[j, a, b]) * component(b, g0, g1, g2)
                         f0, f1, f2 = added(a, s, f0, f1, f2)
                 else:
                     for a in range(dim):
-                        s = 0.0
+                        s = t = 0.0
                         for b in range(dim):
-                            if hessian:
-                                s -= (VP[j, a, b] - B[j, a, b]) * g_rev[p, b] + VP[j, a, b] * q_rev[p, b]
-                                if pair_form:
-                                    s += (VP[i, a, b] - B[i, a, b]) * g[p, b] + VP[i, a, b] * q[p, b]
+                            if pair_form:
+                                s += (S[i, a, b] + S[j, a, b]) * gw[p, b]
                             else:
-                                s -= VP[j, a, b] * g_rev[p, b]
+                                s += S[j, a, b] * gw[p, b]
+                            if hessian:
+                                t -= VP[j, a, b] * q_rev[p, b]
                                 if pair_form:
-                                    s += VP[i, a, b] * g[p, b]
+                                    t += VP[i, a, b] * q[p, b]
                         f0, f1, f2 = added(a, s, f0, f1, f2)
+                        if hessian:
+                            t0, t1, t2 = added(a, t, t0, t1, t2)
                 if hourglass == HOURGLASS_PAPER:
                     # [G eq. 27, 32]: errors projected on the current separation, central force
                     e0, e1, e2 = separation(X, i, j, dim)
@@ -333,7 +355,10 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         h0, h1, h2 = added(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))), h0, h1, h2)
                     k0 += hgc[p] * (youngs[i] + youngs[j])
             for a in range(dim):
-                f_int[i, a] = component(a, f0, f1, f2)
+                if force_form == FORCE_RLM:
+                    f_int[i, a] = component(a, f0, f1, f2)
+                else:
+                    f_int[i, a] = measure[i] * component(a, f0, f1, f2) + component(a, t0, t1, t2)
                 if hourglass != HOURGLASS_OFF:
                     f_hg[i, a] = component(a, h0, h1, h2)
             if bound and hourglass == HOURGLASS_PAPER:
@@ -371,6 +396,57 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
                 s0, s1, s2 = added(b, du * g[p, b], s0, s1, s2)
         for b in range(dim):
             f[i, a, b] = component(b, s0, s1, s2)
+
+
+@njit(cache=True, inline="always")
+def corrected_gradient_row(dim, i, ptr, idx, gw, Linv, d, f):
+    """f[i] = I + sum_j (d_j - d_i) (x) g_ij = I + (sum_j (d_j - d_i) (x) gw_ij) L_i^-T over
+    row i, a row of f at a time summed in locals and stored once."""
+    for a in range(dim):
+        s0 = s1 = s2 = 0.0
+        da = d[i, a]
+        for p in range(ptr[i], ptr[i + 1]):
+            du = d[idx[p], a] - da
+            for b in range(dim):
+                s0, s1, s2 = added(b, du * gw[p, b], s0, s1, s2)
+        for b in range(dim):
+            t = 1.0 if a == b else 0.0
+            for k in range(dim):
+                t += component(k, s0, s1, s2) * Linv[i, b, k]
+            f[i, a, b] = t
+
+
+@njit(cache=True, inline="always")
+def corrected_gradient(dim, Linv, i, gw, p):
+    """g_ij = L_i^-1 gw_ij of pair p of row i, as three scalars."""
+    g0 = g1 = g2 = 0.0
+    for a in range(dim):
+        t = 0.0
+        for b in range(dim):
+            t += Linv[i, a, b] * gw[p, b]
+        g0, g1, g2 = replaced(a, t, g0, g1, g2)
+    return g0, g1, g2
+
+
+@njit(cache=True, inline="always")
+def corrected_stress(dim, i, VP, B, less_B, Linv, measure, S):
+    """S_i = VP_i L_i^-1 / V_i (less_B: (VP_i - B_i) L_i^-1 / V_i), what the force row reads
+    (V the reference measure)."""
+    scale = 1.0 / measure[i]
+    for a in range(dim):
+        for b in range(dim):
+            s = 0.0
+            for k in range(dim):
+                s += (VP[i, a, k] - B[i, a, k] if less_B else VP[i, a, k]) * Linv[i, k, b]
+            S[i, a, b] = s * scale
+
+
+@njit(cache=True, _nrt=False)
+def corrected_stresses(lo, hi, VP, Linv, measure, S):
+    """S_i = VP_i L_i^-1 / V_i for particles lo..hi-1: with an Eulerian kernel, in the reference
+    the forces use (formed once it has moved)."""
+    for i in range(lo, hi):
+        corrected_stress(VP.shape[1], i, VP, VP, False, Linv, measure, S)
 
 
 @njit(cache=True, inline="always")
@@ -568,14 +644,15 @@ def stable_time_step(lo, hi, fs, F, J, min_spacing, stab, wave_speed, law, c, di
 
 
 @njit(cache=True, _nrt=False)
-def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
+def artificial_viscosity(lo, hi, ptr, idx, gw, Linv, measure, X, d, v, J, density, gvolume, mass, support, c0, alpha, beta,
                          f_visc, heating, step_limit):
     """Monaghan's artificial viscosity (Monaghan 1992) for particles lo..hi-1: for each pair
     closing in (v_ij . x_ij < 0),
         Pi_ij = (-alpha c0 mu_ij + beta mu_ij^2) / rho_ij,  mu_ij = l v_ij . x_ij / (|x_ij|^2 + 0.01 l^2),
     l the mean smoothing length (half the support radii), rho_ij the mean current density
     rho0 / J, x and v current; the force on i is -sum_j Pi_ij (m_i rho_j g_ij - m_j rho_i g_ji) / 2
-    with the pairs' kernel gradients g (rho = m / V of the volumes they were built with): the
+    with the pairs' kernel gradients g_ij = L_i^-1 gw_ij, g_ji = -(V^r_i / V^r_j) L_j^-1 gw_ij
+    (V^r the reference measures; rho = m / V of `gvolume`, the volumes they were built with): the
     usual -m_i sum_j m_j Pi_ij grad W_ij, antisymmetric in i and j (momentum is conserved).
     The power a pair's forces dissipate, f_ij . (v_j - v_i) >= 0, heats its two particles
     alike (Monaghan 1992's du_i/dt = 1/2 sum_j m_j Pi_ij v_ij . grad W_ij): `heating` [W].
@@ -601,8 +678,12 @@ def artificial_viscosity(lo, hi, ptr, idx, g, g_rev, X, d, v, J, density, gvolum
             mu = length * approach / (r2 + 0.01 * length * length)
             pi = (-alpha * c0 * mu + beta * mu * mu) / (0.5 * density * (1.0 / J[i] + 1.0 / J[j]))
             rho_i, rho_j = mass[i] / gvolume[i], mass[j] / gvolume[j]
+            g0, g1, g2 = corrected_gradient(dim, Linv, i, gw, p)
+            b0, b1, b2 = corrected_gradient(dim, Linv, j, gw, p)  # g_ji = -(V^r_i / V^r_j) L_j^-1 gw_ij
+            ratio = measure[i] / measure[j]
             for a in range(dim):
-                f = 0.5 * pi * (mass[i] * rho_j * g[p, a] - mass[j] * rho_i * g_rev[p, a])
+                f = 0.5 * pi * (mass[i] * rho_j * component(a, g0, g1, g2)
+                                + mass[j] * rho_i * ratio * component(a, b0, b1, b2))
                 f0, f1, f2 = added(a, -f, f0, f1, f2)
                 heat -= 0.5 * f * (v[j, a] - v[i, a])
         for a in range(dim):

@@ -9,6 +9,10 @@ For each pair (i, j) with X_ij = X_j - X_i and the pair support h_ij = (h_i + h_
 so that sum_j X_ij (x) g_ij = I exactly [G eq. 16] and grad u(X_i) = sum_j (u_j - u_i) (x) g_ij
 is exact for linear fields. A singular or ill-conditioned L_i is reported with the particle's
 global id and position instead of being turned into NaNs.
+
+What is stored is gw_ij = V_j w_ij per pair and L_i^-1 per row, g_ij = L_i^-1 gw_ij: w is
+antisymmetric, so the reverse gradient is g_ji = -(V_i / V_j) L_j^-1 gw_ij, and the pair
+loops apply L^-1 per particle rather than per pair (formulations.tlsph).
 """
 
 from __future__ import annotations
@@ -40,10 +44,10 @@ class ReferencePairs:
     dx: np.ndarray | None  # (npairs, d) X_j - X_i
     w: np.ndarray | None  # (npairs,) W(|X_ij|, h_ij)
     h: np.ndarray | None  # (npairs,) pair support h_ij = (h_i + h_j) / 2
-    g: np.ndarray  # (npairs, d) V_j L_i^-1 w_ij (the reverse g_ji: g[rev], reverse_values)
-    g_sum: np.ndarray  # (rows, d) sum_j g_ij
+    gw: np.ndarray  # (npairs, d) V_j w_ij: the corrected gradient g_ij = L_i^-1 gw_ij
+    gw_sum: np.ndarray  # (rows, d) sum_j gw_ij
+    Linv: np.ndarray  # (rows, d, d) L_i^-1 (-I for a plain row)
     condition: np.ndarray  # (rows,) condition number of L_i
-    rev: np.ndarray  # (npairs,) 32-bit index of the pair (j, i), -1 if j has no row
     bad: np.ndarray  # rows whose L_i is singular or ill-conditioned (`tolerant`: not raised)
     nearest: np.ndarray  # (rows,) each row's nearest neighbour distance (inf without one)
 
@@ -63,19 +67,17 @@ def _correction_matrices(ptr, idx, dx, dwdr, dist, volume, dim, L):
 
 
 @njit(cache=True)
-def _corrected_gradients(ptr, idx, dx, dwdr, dist, volume, Linv, dim, g, g_sum):
+def _weighted_gradients(ptr, idx, dx, dwdr, dist, volume, dim, gw, gw_sum):
+    """gw_ij = V_j w_ij and the row sums, with the same c_ij = V_j (dW/dr / r) as L_i."""
     for i in range(len(ptr) - 1):
         for a in range(dim):
-            g_sum[i, a] = 0.0
+            gw_sum[i, a] = 0.0
         for p in range(ptr[i], ptr[i + 1]):
             j = idx[p]
             c = volume[j] * dwdr[p] / dist[p]
             for a in range(dim):
-                s = 0.0
-                for b in range(dim):
-                    s += Linv[i, a, b] * dx[p, b]
-                g[p, a] = c * s
-                g_sum[i, a] += g[p, a]
+                gw[p, a] = c * dx[p, a]
+                gw_sum[i, a] += gw[p, a]
 
 
 def reverse_index(pairs: Relation) -> np.ndarray:
@@ -144,10 +146,10 @@ def reference_pairs(
     pairs: Relation, kernel: str, corrected: np.ndarray | None = None,
     detached: np.ndarray | None = None, tolerant: bool = False, each_block=None,
 ) -> ReferencePairs:
-    """Kernel values and corrected gradients for every row of `pairs` in `positions`. Rows
-    with `corrected` False get the plain SPH gradient g_ij = -V_j w_ij = V_j grad_i W_ij
-    (L_i^-1 replaced by -I: [R eq. 21-25]), which needs no invertible L_i; so do the rows
-    of `detached` particles (no pairs).
+    """Kernel values, weighted kernel gradients gw_ij and inverse correction matrices for every
+    row of `pairs` in `positions`. Rows with `corrected` False get the plain SPH gradient
+    g_ij = -V_j w_ij = V_j grad_i W_ij (L_i^-1 replaced by -I: [R eq. 21-25]), which needs
+    no invertible L_i; so do the rows of `detached` particles (no pairs).
     `tolerant`: singular or ill-conditioned rows are listed in `bad` (with L_i^-1 = -I)
     instead of raising.
     The rows are taken in blocks of about BLOCK_PAIRS pairs, so that the per-pair
@@ -165,8 +167,9 @@ def reference_pairs(
         plain |= detached[:rows]
     condition = np.full(rows, np.inf)
     condition[plain] = 1.0
-    g = np.empty((npairs, dim))
-    g_sum = np.empty((rows, dim))
+    gw = np.empty((npairs, dim))
+    gw_sum = np.empty((rows, dim))
+    Linv = np.empty((rows, dim, dim))
     nearest = np.full(rows, np.inf)
     kept = None
     for r0, r1 in row_blocks(ptr, BLOCK_PAIRS) if each_block is not None else [(0, rows)]:
@@ -192,8 +195,9 @@ def reference_pairs(
         _condition_numbers(L, ok, condition[r0:r1], np.empty((3, 3)))
         # a singular row takes the plain gradient here; unless `tolerant` the rows are then refused
         L[plain[r0:r1] | ~(condition[r0:r1] < MAX_CONDITION)] = -np.eye(dim)
-        Linv = np.linalg.inv(L) if r1 > r0 else L
-        _corrected_gradients(block_ptr, block_idx, dx, dwdr, dist, volume, Linv, dim, g[p0:p1], g_sum[r0:r1])
+        if r1 > r0:
+            Linv[r0:r1] = np.linalg.inv(L)
+        _weighted_gradients(block_ptr, block_idx, dx, dwdr, dist, volume, dim, gw[p0:p1], gw_sum[r0:r1])
         has = counts[r0:r1] > 0
         if has.any():
             nearest[r0:r1][has] = np.minimum.reduceat(dist, block_ptr[:-1][has])
@@ -213,8 +217,8 @@ def reference_pairs(
             "or check for isolated or collinear particles."
         )
     dx, w, h_pair = kept if kept is not None else (None, None, None)
-    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, g=g, g_sum=g_sum, condition=condition,
-                          rev=reverse_index(pairs), bad=np.flatnonzero(bad), nearest=nearest)
+    return ReferencePairs(pairs=pairs, dx=dx, w=w, h=h_pair, gw=gw, gw_sum=gw_sum, Linv=Linv, condition=condition,
+                          bad=np.flatnonzero(bad), nearest=nearest)
 
 
 class KeptPairs:
@@ -222,12 +226,12 @@ class KeptPairs:
     every step from lists kept between searches, found with a skin; updated-Lagrangian
     SPH, at each update), by compiled passes (`rebuild`) into arrays allocated once per
     search: the pairs of the owned rows closer than the mean of their supports (as
-    neighbors.find_pairs would find them now, in the same order), kernel values and
-    corrected gradients with c_ij = V_j (dW/dr / r) and the inverse of L_i in closed form,
-    the reverse gradients g_ji from L_j^-1 (the rows of the ghosts are summed for L only),
-    the nearest neighbour distance; and with `hessian` (eta, weighted) the stabilisation
-    of formulations.reference (q, gh, their reverses, q's row sums and the stiffening)
-    from the corrected Hessians' row sums Hc_ij 1 = V_j (H_ij 1 - w_ij As_i X_ij),
+    neighbors.find_pairs would find them now, in the same order), kernel values, the
+    weighted gradients gw_ij = V_j (dW/dr / r) X_ij with their row sums and the inverse of
+    L_i in closed form (the rows of the ghosts are summed for L only), the nearest
+    neighbour distance; and with `hessian` (eta, weighted) the stabilisation of
+    formulations.reference (q, gh, their reverses, q's row sums and the stiffening) from
+    the corrected Hessians' row sums Hc_ij 1 = V_j (H_ij 1 - w_ij As_i X_ij),
     As_i = (sum_b C_i[:, b, :]) D_i^-1 (kernels.hessian), h_i = (l_i, ..., l_i)."""
 
     def __init__(self, candidates: Relation, dim: int, kernel: str, hessian: tuple | None = None,
@@ -241,9 +245,9 @@ class KeptPairs:
         self.passes = _compile_kept(dim, self.eta > 0, weighted)
         self.ptr = np.zeros(rows + 1, np.int64)
         self.idx = np.empty(size, np.int32)
-        self.dx, self.g, self.g_rev = (np.empty((size, dim)) for _ in range(3))
+        self.dx, self.gw = np.empty((size, dim)), np.empty((size, dim))
         self.w, self.h, self.slope = np.empty(size), np.empty(size), np.empty(size)
-        self.g_sum = np.empty((rows, dim))
+        self.gw_sum = np.empty((rows, dim))
         self.Linv = np.empty((rows, dim, dim))
         stabilised = size if self.eta > 0 else 0
         self.Hs, self.q, self.q_rev = (np.empty((stabilised, dim)) for _ in range(3))
@@ -287,7 +291,7 @@ class KeptPairs:
                              self.As, min_spacing, *self.scratch, self.report, self.singular)
         if code == _FINE:
             kept_gradients(n_owned, self.ptr, self.idx, self.dx, self.w, self.slope, volume, support, self.Linv,
-                           self.Hs, self.As, self.eta, self.g, self.g_rev, self.g_sum, self.q, self.q_rev,
+                           self.Hs, self.As, self.eta, self.gw, self.gw_sum, self.q, self.q_rev,
                            self.q_sum, self.gh, self.gh_rev, stiffening)
             return int(self.ptr[n_owned]), bad
         a, b, value = int(self.report[0]), int(self.report[1]), self.report[2]
@@ -466,13 +470,13 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
         return _FINE
 
     @njit(cache=True, _nrt=False)
-    def _kept_gradients(n_owned, ptr, idx, dx, w, slope, volume, support, Linv, Hs, As, eta, g, g_rev, g_sum, q,
+    def _kept_gradients(n_owned, ptr, idx, dx, w, slope, volume, support, Linv, Hs, As, eta, gw, gw_sum, q,
                         q_rev, q_sum, gh, gh_rev, stiffening):
-        """KeptPairs.rebuild, second pass over the owned rows: g_ij = V_j s_ij L_i^-1 X_ij and
-        g_ji = V_i s_ij L_j^-1 X_ji (s = dW/dr / r), the same numbers as row j computes, and
-        the row sums of g; with Hessian stabilisation q_ij = eta l_i Hc_ij 1 and
-        gh_ij = eta l_i g_ij . 1 with their reverses, q's row sums and the stiffening
-        1 + (sum |q| + sum |gh| sum |g|) / sum |g| (formulations.reference)."""
+        """KeptPairs.rebuild, second pass over the owned rows: gw_ij = V_j s_ij X_ij
+        (s = dW/dr / r) and its row sums; with Hessian stabilisation, from the corrected
+        gradients g_ij = L_i^-1 gw_ij and g_ji = V_i s_ij L_j^-1 X_ji (row j's numbers),
+        q_ij = eta l_i Hc_ij 1 and gh_ij = eta l_i g_ij . 1 with their reverses, q's row sums
+        and the stiffening 1 + (sum |q| + sum |gh| sum |g|) / sum |g| (formulations.reference)."""
         for i in range(n_owned):
             s0 = s1 = s2 = 0.0
             q0 = q1 = q2 = 0.0
@@ -484,24 +488,25 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                 e1 = dx[p, 1] if dim > 1 else 0.0
                 e2 = dx[p, 2] if dim > 2 else 0.0
                 c, b = volume[j] * slope[p], volume[i] * slope[p]
-                for a in range(dim):  # X_ji = -X_ij: the negated sum is row j's to the bit
-                    g[p, a] = c * _row_times(Linv, i, a, e0, e1, e2, dim)
-                    g_rev[p, a] = b * -_row_times(Linv, j, a, e0, e1, e2, dim)
-                s0 += g[p, 0]
+                gw[p, 0] = c * e0
+                s0 += gw[p, 0]
                 if dim > 1:
-                    s1 += g[p, 1]
+                    gw[p, 1] = c * e1
+                    s1 += gw[p, 1]
                 if dim > 2:
-                    s2 += g[p, 2]
+                    gw[p, 2] = c * e2
+                    s2 += gw[p, 2]
                 if hessian:
                     lj = 0.5 * support[j]
                     wt = w[p] if weighted else 1.0
                     sum_g = sum_rev = norm_g = norm_q = 0.0
                     for a in range(dim):
+                        g = c * _row_times(Linv, i, a, e0, e1, e2, dim)
+                        sum_g += g
+                        sum_rev += b * -_row_times(Linv, j, a, e0, e1, e2, dim)
+                        norm_g += g * g
                         q[p, a] = eta * li * volume[j] * (Hs[p, a] - wt * _row_times(As, i, a, e0, e1, e2, dim))
                         q_rev[p, a] = eta * lj * volume[i] * (Hs[p, a] + wt * _row_times(As, j, a, e0, e1, e2, dim))
-                        sum_g += g[p, a]
-                        sum_rev += g_rev[p, a]
-                        norm_g += g[p, a] * g[p, a]
                         norm_q += q[p, a] * q[p, a]
                     gh[p] = eta * li * sum_g
                     gh_rev[p] = eta * lj * sum_rev
@@ -513,11 +518,11 @@ def _compile_kept(dim: int, hessian: bool, weighted: bool) -> tuple:
                     size_g += math.sqrt(norm_g)
                     size_q += math.sqrt(norm_q)
                     size_gh += abs(gh[p])
-            g_sum[i, 0] = s0
+            gw_sum[i, 0] = s0
             if dim > 1:
-                g_sum[i, 1] = s1
+                gw_sum[i, 1] = s1
             if dim > 2:
-                g_sum[i, 2] = s2
+                gw_sum[i, 2] = s2
             if hessian:
                 q_sum[i, 0] = q0
                 if dim > 1:

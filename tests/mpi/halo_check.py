@@ -1,5 +1,5 @@
-"""Run under mpiexec: every owned particle's neighbour set and corrected gradients must equal
-the single-rank result. Prints OK and exits 0, or prints the first difference and exits 1.
+"""Run under mpiexec: every owned particle's neighbour set, weighted kernel gradients and its
+neighbours' inverse correction matrices must equal the single-rank result. Prints OK and exits 0, or prints the first difference and exits 1.
 
 usage: mpiexec -n P python halo_check.py DIM CELLS
 """
@@ -38,11 +38,12 @@ end = 1.0
 
 
 def rows(sim):
-    """gid -> (sorted neighbour gids, g, g_rev) for the owned particles."""
+    """gid -> (sorted neighbour gids, gw, the neighbours' L^-1) for the owned particles."""
     out = {}
+    ref = sim.topology.relations[0].ref
     for i in range(sim.state.n_owned):
-        p = slice(sim.topology.relations[0].ref.ptr[i], sim.topology.relations[0].ref.ptr[i + 1])
-        out[int(sim.state.gid[i])] = (sim.state.gid[sim.topology.relations[0].ref.idx[p]], sim.topology.relations[0].ref.g[p], sim.topology.relations[0].ref.g_rev[p])
+        p = slice(ref.ptr[i], ref.ptr[i + 1])
+        out[int(sim.state.gid[i])] = (sim.state.gid[ref.idx[p]], ref.gw[p], ref.Linv[ref.idx[p]])
     return out
 
 
@@ -58,9 +59,9 @@ if comm.rank == 0:
         owners.update(o)
     assert sorted(parallel) == sorted(serial), "particles lost or duplicated"
     max_ranks = 0
-    for gid, (nbr, g, g_rev) in serial.items():
-        p_nbr, p_g, p_rev = parallel[gid]
-        if not (np.array_equal(nbr, p_nbr) and np.array_equal(g, p_g) and np.array_equal(g_rev, p_rev)):
+    for gid, (nbr, gw, Linv) in serial.items():
+        p_nbr, p_gw, p_Linv = parallel[gid]
+        if not (np.array_equal(nbr, p_nbr) and np.array_equal(gw, p_gw) and np.array_equal(Linv, p_Linv)):
             print(f"particle {gid}: neighbours or gradients differ on rank {owners[gid]}")
             status = 1
             break
