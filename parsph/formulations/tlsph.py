@@ -84,10 +84,13 @@ VARIATIONAL_SCALE = 0.2
 # LAMMPS MACHDYN's switch to its viscous hourglass force: a pair of which a particle's
 # equivalent plastic strain exceeds this
 VISCOUS_ONSET = 1.0e-3
-# The force row's floating-point licence: without signed zeros ("nsz") the compiler may
-# drop the additions of 0.0 that start each sum (x + 0.0 is x except for x = -0.0): the same
-# values, about 10 % faster.
-FORCE_ROW_MATH = {"nsz"}
+# The two stages' floating-point licence: without signed zeros ("nsz") the compiler may drop
+# the additions of 0.0 that start each sum (x + 0.0 is x except for x = -0.0): the same values,
+# the force row about 10 % faster, the variational form's kinematics 3 %. Not fused
+# multiply-adds ("contract"), though another 10 %: with them a run that compiles the kernels
+# and a run that loads them from the cache differ in the last bit
+# (docs/notes/2026-12-05-pair-data-memory.md).
+STAGE_MATH = {"nsz"}
 
 
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
@@ -152,7 +155,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                   corrects: bool):
     """kinematics_stress, stage 1, for its switches (`variational`: the variational hourglass
     form's penalty and hourglass stress; `corrects`: it forms the force row's S)."""
-    @njit(cache=True, _nrt=False)
+    @njit(cache=True, _nrt=False, fastmath=STAGE_MATH)
     def kinematics_stress(lo, hi, ptr, idx, gw, Linv, measure, q, gh, X, hgc, d, volume, youngs, c, state, trial,
                           damage_state, damage_trial, f, fs, F, Fr, VP, S, J, psi, hg_psi, P, work, err, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
@@ -209,7 +212,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
 @functools.lru_cache(maxsize=None)
 def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, viscous: bool):
     """forces, stage 2, for its switches."""
-    @njit(cache=True, _nrt=False, fastmath=FORCE_ROW_MATH)
+    @njit(cache=True, _nrt=False, fastmath=STAGE_MATH)
     def forces(lo, hi, ptr, idx, gw, gw_sum, Linv, measure, q, q_rev, q_sum, X, hgc, d, fs, VP, S, youngs,
                volume, mass, f_int, f_hg, bound, omega_hg2, damper_rate2, tensor, v, plastic, support, kind, vc):
         """Stage 2 for particles lo..hi-1: internal force f_int and, if enabled, f_hg and (if
