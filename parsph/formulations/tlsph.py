@@ -393,14 +393,8 @@ def gradient_row(dim, i, base, ptr, idx, g, d, f):
     """f[i] = I + sum_j (d_j - d_base) (x) g_ij over row i of (ptr, idx, g), a row of f at a
     time summed in locals (stored once: the same sums, term by term in row order)."""
     for a in range(dim):
-        s0 = 1.0 if a == 0 else 0.0
-        s1 = 1.0 if a == 1 else 0.0
-        s2 = 1.0 if a == 2 else 0.0
-        da = d[base, a]
-        for p in range(ptr[i], ptr[i + 1]):
-            du = d[idx[p], a] - da
-            for b in range(dim):
-                s0, s1, s2 = added(b, du * g[p, b], s0, s1, s2)
+        s0, s1, s2 = row_sums(dim, a, i, base, ptr, idx, g, d, 1.0 if a == 0 else 0.0,
+                              1.0 if a == 1 else 0.0, 1.0 if a == 2 else 0.0)
         for b in range(dim):
             f[i, a, b] = component(b, s0, s1, s2)
 
@@ -410,17 +404,23 @@ def corrected_gradient_row(dim, i, ptr, idx, gw, Linv, d, f):
     """f[i] = I + sum_j (d_j - d_i) (x) g_ij = I + (sum_j (d_j - d_i) (x) gw_ij) L_i^-T over
     row i, a row of f at a time summed in locals and stored once."""
     for a in range(dim):
-        s0 = s1 = s2 = 0.0
-        da = d[i, a]
-        for p in range(ptr[i], ptr[i + 1]):
-            du = d[idx[p], a] - da
-            for b in range(dim):
-                s0, s1, s2 = added(b, du * gw[p, b], s0, s1, s2)
+        s0, s1, s2 = row_sums(dim, a, i, i, ptr, idx, gw, d, 0.0, 0.0, 0.0)
         for b in range(dim):
             t = 1.0 if a == b else 0.0
             for k in range(dim):
                 t += component(k, s0, s1, s2) * Linv[i, b, k]
             f[i, a, b] = t
+
+
+@njit(cache=True, inline="always")
+def row_sums(dim, a, i, base, ptr, idx, g, d, s0, s1, s2):
+    """(s0, s1, s2) + sum_j (d_j - d_base)_a g_ij over row i, term by term in row order."""
+    da = d[base, a]
+    for p in range(ptr[i], ptr[i + 1]):
+        du = d[idx[p], a] - da
+        for b in range(dim):
+            s0, s1, s2 = added(b, du * g[p, b], s0, s1, s2)
+    return s0, s1, s2
 
 
 @njit(cache=True, inline="always")
