@@ -20,6 +20,7 @@ particle (the arrays the simulation holds, `arrays_held`)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import operator
@@ -30,6 +31,7 @@ import numpy as np
 from numba import njit
 from numba.core.registry import CPUDispatcher
 
+from parsph import pair_lanes
 from parsph.formulations.base import CompiledOnce
 
 SAMPLE = 64  # particles whose flops are counted per call over a range
@@ -251,29 +253,47 @@ def count_flops(call: Call) -> float | None:
     if not ranged and sum(a.size for a in args if isinstance(a, np.ndarray) and a.dtype == np.float64) > FULL_LIMIT:
         return None
     counted = tuple(CountingArray(a) if isinstance(a, np.ndarray) and a.dtype == np.float64 else a for a in args)
+    try:
+        with python_sources(counting=True):
+            source = kernel.py_func
+            Counted.count = 0
+            if not ranged:
+                source(*counted)
+                return float(Counted.count)
+            lo, hi = int(args[0]), int(args[1])
+            picks = np.unique(np.linspace(lo, hi - 1, min(SAMPLE, hi - lo)).astype(np.int64))
+            for i in picks:
+                source(int(i), int(i) + 1, *counted[2:])
+            return Counted.count * (hi - lo) / len(picks)
+    except Exception:  # noqa: BLE001 - a construct the counting types do not follow
+        return None
+
+
+@contextlib.contextmanager
+def python_sources(counting: bool = False):
+    """Within, parsph's compiled functions are their Python sources: the sources call each
+    other's sources, not machine code, and the compiled-only helpers (pair_lanes' intrinsics)
+    are numpy and Python equivalents. With `counting`, new float arrays hold Counted values
+    and math's functions count (count_flops)."""
+    lanes = (lambda rows: _counted_array((rows, pair_lanes.LANES))) if counting else (
+        lambda rows: np.zeros((rows, pair_lanes.LANES)))
+    intrinsics = ((pair_lanes.lane_block, lanes), (pair_lanes.quotient, operator.truediv))
     restore = []
     try:
-        for module in _parsph_modules():  # the sources call each other's sources, not machine code
+        for module in _parsph_modules():
             for name, value in list(vars(module).items()):
                 if isinstance(value, CPUDispatcher):
                     restore.append((module, name, value))
                     setattr(module, name, value.py_func)
-            for name, proxy in (("np", _NumpyForCounting()), ("math", _MathForCounting())):
+                for intrinsic, python in intrinsics:
+                    if value is intrinsic:
+                        restore.append((module, name, value))
+                        setattr(module, name, python)
+            for name, proxy in (("np", _NumpyForCounting()), ("math", _MathForCounting())) if counting else ():
                 if getattr(module, name, None) in (np, math):
                     restore.append((module, name, getattr(module, name)))
                     setattr(module, name, proxy)
-        source = kernel.py_func
-        Counted.count = 0
-        if not ranged:
-            source(*counted)
-            return float(Counted.count)
-        lo, hi = int(args[0]), int(args[1])
-        picks = np.unique(np.linspace(lo, hi - 1, min(SAMPLE, hi - lo)).astype(np.int64))
-        for i in picks:
-            source(int(i), int(i) + 1, *counted[2:])
-        return Counted.count * (hi - lo) / len(picks)
-    except Exception:  # noqa: BLE001 - a construct the counting types do not follow
-        return None
+        yield
     finally:
         for owner, name, value in reversed(restore):
             setattr(owner, name, value)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 import pytest
 
 from parsph import readouts
+from parsph.profile import Recorder, python_sources
 from physics import block_2d, elastic_constants, run_until, simulation
 
 MODELS = ["saint_venant_kirchhoff", "neo_hookean", "neo_hookean_nearly_incompressible", "mooney_rivlin"]
@@ -229,3 +232,64 @@ def test_energy_balance_holds_while_a_prescribed_motion_accelerates_particles():
     work = np.abs(r["external_work"]).max()
     assert work > 0
     assert np.abs(r["total_energy"] - r["total_energy"][0]).max() < 1e-6 * work
+
+
+def _force_stage_call(sim):
+    """The force stage's call (compiled kernel and arguments) in the body's next step."""
+    with Recorder(sim) as recorder:
+        sim.step()
+    return next(call for call in recorder.calls if call.kernel.py_func.__name__ == "forces")
+
+
+@pytest.mark.parametrize("case", ["cube paper", "random 2D variational", "taylor viscous"])
+def test_the_compiled_force_stage_gives_the_bits_of_its_python_source(case):
+    """The force stage forms its hourglass terms lane by lane, in SIMD instructions
+    (parsph.pair_lanes), and sums them in row order afterwards; the compiler may not fuse,
+    reorder or drop an operation. Its Python source, one IEEE operation at a time, gives the
+    same bits, on rows that take every branch: the stable step's bounds formed, and with the
+    viscous rule pairs that have yielded. (Fused multiply-adds fail this test.)"""
+    if case == "cube paper":
+        sim = simulation(cube("neo_hookean"), ['formulation.hourglass_form="paper"'])
+    elif case == "random 2D variational":
+        sim = simulation(random_set_2d(hourglass=50.0), ['formulation.force_form="virtual_work"'])
+    else:
+        sim = simulation("taylor_impact", ['formulation.plastic_hourglass="viscous"'])
+    if case != "taylor viscous":
+        rng = np.random.default_rng(4)
+        sim.state.u[:] = 0.01 * rng.standard_normal(sim.state.u.shape)
+        sim.state.v[:] = 0.5 * rng.standard_normal(sim.state.v.shape)
+        sim.compute_forces()
+    else:
+        for _ in range(60):
+            sim.step()
+    call = _force_stage_call(sim)
+    names = list(inspect.signature(call.kernel.py_func).parameters)
+    args = list(call.args)
+    args[names.index("bound")] = True
+    if case == "taylor viscous":
+        yielded = np.flatnonzero(sim.quantity("plastic_strain") > 1e-3)
+        assert len(yielded) > 20
+        args[0], args[1] = int(yielded[0]), int(yielded[0]) + 40
+    else:
+        args[0], args[1] = 0, min(60, sim.state.n_owned)
+    outputs = ["f_int", "f_hg", "omega_hg2"] + (["damper_rate2"] if case == "taylor viscous" else [])
+    for name in outputs:
+        args[names.index(name)] = np.full_like(args[names.index(name)], np.nan)
+    compiled = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+    source = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+    call.kernel(*compiled)
+    with python_sources():
+        call.kernel.py_func(*source)
+    rows = slice(args[0], args[1])
+    for name in outputs:
+        k = names.index(name)
+        assert np.all(np.isfinite(compiled[k][rows])), name
+        # (the yielded rows' springs are off, and so their bound)
+        assert np.any(compiled[k][rows] != 0.0) or (name, case) == ("omega_hg2", "taylor viscous"), name
+        if name in ("omega_hg2", "damper_rate2"):  # from the bound's tensor by acos and cos, whose
+            # last bit differs between the compiled code's math library and Python's
+            assert np.allclose(compiled[k], source[k], rtol=1e-13, atol=0.0, equal_nan=True), name
+        else:
+            assert np.array_equal(compiled[k], source[k], equal_nan=True), name
+    tensor = names.index("tensor")  # the last row's bound tensor (the damper's, with the viscous rule)
+    assert np.any(compiled[tensor] != 0.0) and np.array_equal(compiled[tensor], source[tensor])

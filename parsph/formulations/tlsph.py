@@ -67,6 +67,7 @@ from parsph.formulations.base import CompiledOnce
 from parsph.kernels.functions import value, value_and_slope
 from parsph.materials import update
 from parsph.materials.elastic import det, right_cauchy_green, symmetric_extremes
+from parsph.pair_lanes import LANES, lane_block, lanes_used, quotient
 from parsph.small_vectors import added, component, replaced, separation
 
 HOURGLASS_OFF, HOURGLASS_PAPER, HOURGLASS_VARIATIONAL = 0, 1, 2
@@ -91,6 +92,12 @@ VISCOUS_ONSET = 1.0e-3
 # and a run that loads them from the cache differ in the last bit
 # (docs/notes/2026-12-05-pair-data-memory.md).
 STAGE_MATH = {"nsz"}
+# the rows of the force stage's block of a row's pairs for the hourglass force (pair_lanes):
+# gathered, X_ij, d_j, fs_j (row by row), E_j, h_j and the pair's coefficient; formed, x_ij
+# (with the variational form its direct force), |x_ij|^2, |x_ij| and the spring's coefficient
+REF, NEIGHBOUR_D, GRADIENT, YOUNGS, SUPPORT, HGC = 0, 3, 6, 15, 16, 17
+SEP, R2, DISTANCE, COEFFICIENT = 18, 21, 22, 23
+LANE_ROWS = 24
 
 
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
@@ -240,12 +247,16 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
         corrected g_ij it uses particle i's correction for both terms and does not conserve
         linear momentum."""
         pair_form = force_form == FORCE_PAIR
+        lanes = lane_block(LANE_ROWS)  # a row's pairs for the hourglass force (pair_lanes)
+        mine = lane_block(1)[0]  # particle i's fs (row by row) and d
         for i in range(lo, hi):
             # the row's sums are kept in locals, (f0, f1, f2) of f_int, (h0, h1, h2) of f_hg and
             # the spring and damper tensors (k*, c*: xx, yy, zz, xy, yz, xz), and stored once:
-            # the pair loop stores nothing, so the compiler keeps them and particle i's data in
-            # registers (the sums are the same, term by term in row order)
-            # (f0, f1, f2): the S terms, times V_i when stored; (t0, t1, t2): the q terms
+            # the pair loop stores only to its own block of lanes, so the compiler keeps them
+            # and particle i's data in registers (the sums are the same, term by term in row
+            # order). (f0, f1, f2): the S terms, times V_i when stored; (t0, t1, t2): the q
+            # terms. The hourglass force's terms are formed lane by lane (spring_lanes,
+            # penalty_lanes) and summed after each block of the row.
             f0 = f1 = f2 = h0 = h1 = h2 = t0 = t1 = t2 = 0.0
             k0 = k1 = k2 = k3 = k4 = k5 = 0.0
             c0 = c1 = c2 = c3 = c4 = c5 = 0.0
@@ -259,52 +270,58 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             t += VP[i, a, b] * q_sum[i, b]
                     f0, f1, f2 = replaced(a, s, f0, f1, f2)
                     t0, t1, t2 = replaced(a, t, t0, t1, t2)
-            for p in range(ptr[i], ptr[i + 1]):
-                j = idx[p]
-                if force_form == FORCE_RLM:
-                    ratio = volume[i] / volume[j]
-                    g0, g1, g2 = corrected_gradient(dim, Linv, i, gw, p)
-                    for a in range(dim):
-                        s = 0.0
-                        for b in range(dim):
-                            s += (VP[i, a, b] + ratio * VP[j, a, b]) * component(b, g0, g1, g2)
-                        f0, f1, f2 = added(a, s, f0, f1, f2)
-                else:
-                    for a in range(dim):
-                        s = t = 0.0
-                        for b in range(dim):
-                            if pair_form:
-                                s += (S[i, a, b] + S[j, a, b]) * gw[p, b]
-                            else:
-                                s += S[j, a, b] * gw[p, b]
-                            if hessian:
-                                t -= VP[j, a, b] * q_rev[p, b]
+            if hourglass != HOURGLASS_OFF:
+                for a in range(dim):
+                    for b in range(dim):
+                        mine[3 * a + b] = fs[i, a, b]
+                    mine[9 + a] = d[i, a]
+            start = ptr[i]
+            while start < ptr[i + 1]:  # the row LANES pairs at a time (pair_lanes)
+                stop = min(start + LANES, ptr[i + 1])
+                for p in range(start, stop):
+                    j = idx[p]
+                    if force_form == FORCE_RLM:
+                        ratio = volume[i] / volume[j]
+                        g0, g1, g2 = corrected_gradient(dim, Linv, i, gw, p)
+                        for a in range(dim):
+                            s = 0.0
+                            for b in range(dim):
+                                s += (VP[i, a, b] + ratio * VP[j, a, b]) * component(b, g0, g1, g2)
+                            f0, f1, f2 = added(a, s, f0, f1, f2)
+                    else:
+                        for a in range(dim):
+                            s = t = 0.0
+                            for b in range(dim):
                                 if pair_form:
-                                    t += VP[i, a, b] * q[p, b]
-                        f0, f1, f2 = added(a, s, f0, f1, f2)
-                        if hessian:
-                            t0, t1, t2 = added(a, t, t0, t1, t2)
+                                    s += (S[i, a, b] + S[j, a, b]) * gw[p, b]
+                                else:
+                                    s += S[j, a, b] * gw[p, b]
+                                if hessian:
+                                    t -= VP[j, a, b] * q_rev[p, b]
+                                    if pair_form:
+                                        t += VP[i, a, b] * q[p, b]
+                            f0, f1, f2 = added(a, s, f0, f1, f2)
+                            if hessian:
+                                t0, t1, t2 = added(a, t, t0, t1, t2)
+                    if hourglass != HOURGLASS_OFF:
+                        gather_pair(dim, lanes, p - start, X, i, j, d, fs, youngs, support, hgc[p])
                 if hourglass == HOURGLASS_PAPER:
-                    # [G eq. 27, 32]: errors projected on the current separation, central force
-                    e0, e1, e2 = separation(X, i, j, dim)
-                    x0 = x1 = x2 = 0.0
-                    r2 = 0.0
-                    for a in range(dim):
-                        xa = component(a, e0, e1, e2) + d[j, a] - d[i, a]
-                        x0, x1, x2 = replaced(a, xa, x0, x1, x2)
-                        r2 += xa * xa
-                    r = math.sqrt(r2)
-                    di = 0.0
-                    dj = 0.0
-                    for a in range(dim):
-                        fi = 0.0
-                        fj = 0.0
-                        for b in range(dim):
-                            fi += fs[i, a, b] * component(b, e0, e1, e2)
-                            fj += fs[j, a, b] * component(b, e0, e1, e2)
-                        xa = component(a, x0, x1, x2)
-                        di += (fi - xa) * xa
-                        dj += (fj - xa) * xa
+                    spring_lanes(dim, lanes, lanes_used(stop - start), mine, youngs[i], support[i])
+                elif hourglass == HOURGLASS_VARIATIONAL:
+                    penalty_lanes(dim, lanes, lanes_used(stop - start), mine, youngs[i])
+                for lane in range(stop - start if hourglass != HOURGLASS_OFF else 0):
+                    x0, x1, x2 = lanes[SEP, lane], lanes[SEP + 1, lane], lanes[SEP + 2, lane]
+                    if hourglass == HOURGLASS_VARIATIONAL:
+                        h0 += x0
+                        h1 += x1
+                        h2 += x2
+                        k0 += lanes[HGC, lane] * (youngs[i] + lanes[YOUNGS, lane])
+                        continue
+                    r2 = lanes[R2, lane]
+                    r = lanes[DISTANCE, lane]
+                    c = lanes[COEFFICIENT, lane]  # the spring's [G eq. 27, 32], zero where r = 0
+                    p = start + lane
+                    j = idx[p]
                     yielded = viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET
                     h = closing = approach = scale = slope = 0.0
                     if yielded or (viscous and bound and r > 0.0):
@@ -312,15 +329,16 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                         r0 = 0.0
                         err2 = 0.0
                         for a in range(dim):
+                            ea = lanes[REF + a, lane]
                             fi = 0.0
                             for b in range(dim):
-                                fi += 0.5 * (fs[i, a, b] + fs[j, a, b]) * component(b, e0, e1, e2)
+                                fi += 0.5 * (fs[i, a, b] + lanes[GRADIENT + 3 * a + b, lane]) * lanes[REF + b, lane]
                             xa = component(a, x0, x1, x2)
                             gamma = fi - xa
                             err2 += gamma * gamma
                             closing += gamma * xa
                             approach += xa * (v[j, a] - v[i, a])
-                            r0 += component(a, e0, e1, e2) * component(a, e0, e1, e2)
+                            r0 += ea * ea
                         r0 = math.sqrt(r0)
                         e = max(math.sqrt(err2) / r0, 0.05)
                         slope = value_and_slope(kind, r0, h, dim)[1]
@@ -333,34 +351,18 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                                 scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)), x0, x1, x2,
                                 c0, c1, c2, c3, c4, c5)
                     if yielded:
+                        c = 0.0
                         approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
                         if approach * closing < 0.0:
                             mu = h * approach / (r + 0.1 * h)
                             c = -scale * mu * slope / (r + 0.01 * h)
-                            h0 += c * x0
-                            h1 += c * x1
-                            h2 += c * x2
-                    elif r > 0.0:  # coinciding particles (a wall's projection): the force's limit, zero
-                        # the regularising length 0.1 h_ij, h_ij the pair's mean support
-                        c = -hgc[p] * (youngs[i] * di + youngs[j] * dj) / (r * (r + 0.1 * (0.5 * (support[i] + support[j]))))
-                        h0 += c * x0
-                        h1 += c * x1
-                        h2 += c * x2
-                        if bound:
-                            k0, k1, k2, k3, k4, k5 = spring_terms(hgc[p] * (youngs[i] + youngs[j]) / r2, x0, x1, x2,
-                                                                  k0, k1, k2, k3, k4, k5)
-                elif hourglass == HOURGLASS_VARIATIONAL:
-                    # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
-                    e0, e1, e2 = separation(X, i, j, dim)
-                    for a in range(dim):
-                        xa = component(a, e0, e1, e2) + d[j, a] - d[i, a]
-                        fi = 0.0
-                        fj = 0.0
-                        for b in range(dim):
-                            fi += fs[i, a, b] * component(b, e0, e1, e2)
-                            fj += fs[j, a, b] * component(b, e0, e1, e2)
-                        h0, h1, h2 = added(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))), h0, h1, h2)
-                    k0 += hgc[p] * (youngs[i] + youngs[j])
+                    elif bound and r > 0.0:
+                        k0, k1, k2, k3, k4, k5 = spring_terms(hgc[p] * (youngs[i] + youngs[j]) / r2, x0, x1, x2,
+                                                              k0, k1, k2, k3, k4, k5)
+                    h0 += c * x0  # (a pair without a force adds 0.0, which changes no sum)
+                    h1 += c * x1
+                    h2 += c * x2
+                start = stop
             for a in range(dim):
                 if force_form == FORCE_RLM:
                     f_int[i, a] = component(a, f0, f1, f2)
@@ -386,6 +388,69 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                 omega_hg2[i] = 2.0 * k0 / mass[i]
 
     return CompiledOnce(forces, f"{COMPILED_SOURCE} {dim} {force_form} {hourglass} {hessian} {viscous}")
+
+
+@njit(cache=True, inline="always")
+def gather_pair(dim, lanes, lane, X, i, j, d, fs, youngs, support, hgc):
+    """Pair (i, j)'s data for the hourglass force into column `lane` of the force stage's block:
+    X_ij, d_j, fs_j, E_j, h_j and the pair's coefficient hgc."""
+    e0, e1, e2 = separation(X, i, j, dim)
+    for a in range(dim):
+        lanes[REF + a, lane] = component(a, e0, e1, e2)
+        lanes[NEIGHBOUR_D + a, lane] = d[j, a]
+        for b in range(dim):
+            lanes[GRADIENT + 3 * a + b, lane] = fs[j, a, b]
+    lanes[YOUNGS, lane] = youngs[j]
+    lanes[SUPPORT, lane] = support[j]
+    lanes[HGC, lane] = hgc
+
+
+@njit(cache=True, inline="always")
+def spring_lanes(dim, lanes, used, mine, youngs_i, support_i):
+    """Lane by lane, particle i's pairs' x_ij = X_ij + d_j - d_i, |x_ij|^2, |x_ij| and the
+    coefficient c of the paper's hourglass force c x_ij [G eq. 27, 32] (zero where x_ij = 0):
+    c = -c_ij (E_i delta^i + E_j delta^j) / (|x_ij| (|x_ij| + 0.1 h_ij)),
+    delta^i = (fs_i X_ij - x_ij) . x_ij, h_ij the pair's mean support (`mine`: fs_i, d_i)."""
+    for lane in range(used):
+        r2 = 0.0
+        for a in range(dim):
+            xa = lanes[REF + a, lane] + lanes[NEIGHBOUR_D + a, lane] - mine[9 + a]
+            lanes[SEP + a, lane] = xa
+            r2 += xa * xa
+        r = math.sqrt(r2)
+        di = 0.0
+        dj = 0.0
+        for a in range(dim):
+            fi = 0.0
+            fj = 0.0
+            for b in range(dim):
+                eb = lanes[REF + b, lane]
+                fi += mine[3 * a + b] * eb
+                fj += lanes[GRADIENT + 3 * a + b, lane] * eb
+            xa = lanes[SEP + a, lane]
+            di += (fi - xa) * xa
+            dj += (fj - xa) * xa
+        c = quotient(-lanes[HGC, lane] * (youngs_i * di + lanes[YOUNGS, lane] * dj),
+                     r * (r + 0.1 * (0.5 * (support_i + lanes[SUPPORT, lane]))))
+        lanes[R2, lane] = r2
+        lanes[DISTANCE, lane] = r
+        lanes[COEFFICIENT, lane] = c if r > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def penalty_lanes(dim, lanes, used, mine, youngs_i):
+    """Lane by lane, the variational penalty's direct force on particle i from each pair,
+    -c_ij (E_i e^i_ij + E_j e^j_ij), e^i_ij = fs_i X_ij - x_ij, into the rows of x_ij."""
+    for lane in range(used):
+        for a in range(dim):
+            xa = lanes[REF + a, lane] + lanes[NEIGHBOUR_D + a, lane] - mine[9 + a]
+            fi = 0.0
+            fj = 0.0
+            for b in range(dim):
+                eb = lanes[REF + b, lane]
+                fi += mine[3 * a + b] * eb
+                fj += lanes[GRADIENT + 3 * a + b, lane] * eb
+            lanes[SEP + a, lane] = -(lanes[HGC, lane] * (youngs_i * (fi - xa) + lanes[YOUNGS, lane] * (fj - xa)))
 
 
 @njit(cache=True, inline="always")
