@@ -234,20 +234,25 @@ def test_energy_balance_holds_while_a_prescribed_motion_accelerates_particles():
     assert np.abs(r["total_energy"] - r["total_energy"][0]).max() < 1e-6 * work
 
 
-def _force_stage_call(sim):
-    """The force stage's call (compiled kernel and arguments) in the body's next step."""
+def _stage_call(sim, kernel: str):
+    """A stage's call (compiled kernel and arguments) in the body's next step."""
     with Recorder(sim) as recorder:
         sim.step()
-    return next(call for call in recorder.calls if call.kernel.py_func.__name__ == "forces")
+    return next(call for call in recorder.calls if call.kernel.py_func.__name__ == kernel)
 
 
+# per case, the kernels' outputs the test holds to their sources (the rows' values written)
+STAGE_OUTPUTS = {"forces": ("f_int", "f_hg", "omega_hg2"), "kinematics_stress": ("fs", "VP", "S", "psi", "hg_psi")}
+
+
+@pytest.mark.parametrize("kernel", ["forces", "kinematics_stress"])
 @pytest.mark.parametrize("case", ["cube paper", "random 2D variational", "taylor viscous"])
-def test_the_compiled_force_stage_gives_the_bits_of_its_python_source(case):
-    """The force stage forms its hourglass terms lane by lane, in SIMD instructions
-    (parsph.pair_lanes), and sums them in row order afterwards; the compiler may not fuse,
-    reorder or drop an operation. Its Python source, one IEEE operation at a time, gives the
-    same bits, on rows that take every branch: the stable step's bounds formed, and with the
-    viscous rule pairs that have yielded. (Fused multiply-adds fail this test.)"""
+def test_the_compiled_stages_give_the_bits_of_their_python_sources(case, kernel):
+    """The stages form their hourglass terms lane by lane, in SIMD instructions
+    (parsph.pair_lanes), and sum them in row order afterwards; the compiler may not fuse,
+    reorder or drop an operation. Their Python sources, one IEEE operation at a time, give
+    the same bits, on rows that take every branch: the stable step's bounds formed, and with
+    the viscous rule pairs that have yielded. (Fused multiply-adds fail this test.)"""
     if case == "cube paper":
         sim = simulation(cube("neo_hookean"), ['formulation.hourglass_form="paper"'])
     elif case == "random 2D variational":
@@ -262,17 +267,22 @@ def test_the_compiled_force_stage_gives_the_bits_of_its_python_source(case):
     else:
         for _ in range(60):
             sim.step()
-    call = _force_stage_call(sim)
+    call = _stage_call(sim, kernel)
     names = list(inspect.signature(call.kernel.py_func).parameters)
     args = list(call.args)
-    args[names.index("bound")] = True
     if case == "taylor viscous":
         yielded = np.flatnonzero(sim.quantity("plastic_strain") > 1e-3)
         assert len(yielded) > 20
         args[0], args[1] = int(yielded[0]), int(yielded[0]) + 40
     else:
         args[0], args[1] = 0, min(60, sim.state.n_owned)
-    outputs = ["f_int", "f_hg", "omega_hg2"] + (["damper_rate2"] if case == "taylor viscous" else [])
+    rows = slice(args[0], args[1])
+    outputs = list(STAGE_OUTPUTS[kernel])
+    if kernel == "forces":
+        args[names.index("bound")] = True
+        outputs += ["damper_rate2"] if case == "taylor viscous" else []
+    elif case != "random 2D variational":
+        outputs.remove("hg_psi")  # the variational form's penalty only
     for name in outputs:
         args[names.index(name)] = np.full_like(args[names.index(name)], np.nan)
     compiled = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
@@ -280,7 +290,6 @@ def test_the_compiled_force_stage_gives_the_bits_of_its_python_source(case):
     call.kernel(*compiled)
     with python_sources():
         call.kernel.py_func(*source)
-    rows = slice(args[0], args[1])
     for name in outputs:
         k = names.index(name)
         assert np.all(np.isfinite(compiled[k][rows])), name
@@ -291,5 +300,6 @@ def test_the_compiled_force_stage_gives_the_bits_of_its_python_source(case):
             assert np.allclose(compiled[k], source[k], rtol=1e-13, atol=0.0, equal_nan=True), name
         else:
             assert np.array_equal(compiled[k], source[k], equal_nan=True), name
-    tensor = names.index("tensor")  # the last row's bound tensor (the damper's, with the viscous rule)
-    assert np.any(compiled[tensor] != 0.0) and np.array_equal(compiled[tensor], source[tensor])
+    if kernel == "forces":
+        tensor = names.index("tensor")  # the last row's bound tensor (the damper's, with the viscous rule)
+        assert np.any(compiled[tensor] != 0.0) and np.array_equal(compiled[tensor], source[tensor])

@@ -154,7 +154,7 @@ class NodalFormulation(Formulation):
         """The passes of one force evaluation over `body`'s owned particles of `state`."""
         hessian, hourglass = self.eta > 0, self.hourglass_form > 0
         dim = state.dim  # the kernels' scratch (they run without Numba's reference counting)
-        scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)), np.empty(dim))
+        scratch = (np.empty((dim, dim)), np.empty((update.WORK, 3, 3)))
         tensor = np.empty((3, 3))  # the row's spring tensor, for its largest eigenvalue
         out = []
         motion = "fs" if self.updated else "F"  # the motion from the reference: F itself in the initial one

@@ -92,12 +92,16 @@ VISCOUS_ONSET = 1.0e-3
 # and a run that loads them from the cache differ in the last bit
 # (docs/notes/2026-12-05-pair-data-memory.md).
 STAGE_MATH = {"nsz"}
-# the rows of the force stage's block of a row's pairs for the hourglass force (pair_lanes):
-# gathered, X_ij, d_j, fs_j (row by row), E_j, h_j and the pair's coefficient; formed, x_ij
-# (with the variational form its direct force), |x_ij|^2, |x_ij| and the spring's coefficient
-REF, NEIGHBOUR_D, GRADIENT, YOUNGS, SUPPORT, HGC = 0, 3, 6, 15, 16, 17
-SEP, R2, DISTANCE, COEFFICIENT = 18, 21, 22, 23
-LANE_ROWS = 24
+# the rows of the stages' blocks of a row's pairs (pair_lanes). Gathered for both hourglass
+# forms: X_ij, d_j and the pair's coefficient c_ij. The force stage's: gathered, fs_j (row by
+# row), E_j and h_j; formed, x_ij (the variational form: its direct force), |x_ij|^2, |x_ij|
+# and the spring's coefficient. The variational penalty's, in stage 1: formed, the pair's
+# terms of the hourglass stress (row by row) and of the penalty energy.
+REF, NEIGHBOUR_D, HGC = 0, 3, 6
+GRADIENT, YOUNGS, SUPPORT, SEP, R2, DISTANCE, COEFFICIENT = 7, 16, 17, 18, 21, 22, 23
+FORCE_ROWS = 24
+STRESS_TERMS, ENERGY_TERM = 7, 16
+PENALTY_ROWS = 17
 
 
 def compile_stages(dim: int, law: int, force_form: int, hourglass: int, reference: int = REFERENCE_INITIAL,
@@ -164,12 +168,15 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
     form's penalty and hourglass stress; `corrects`: it forms the force row's S)."""
     @njit(cache=True, _nrt=False, fastmath=STAGE_MATH)
     def kinematics_stress(lo, hi, ptr, idx, gw, Linv, measure, q, gh, X, hgc, d, volume, youngs, c, state, trial,
-                          damage_state, damage_trial, f, fs, F, Fr, VP, S, J, psi, hg_psi, P, work, err, dt):
+                          damage_state, damage_trial, f, fs, F, Fr, VP, S, J, psi, hg_psi, P, work, dt):
         """Stage 1 for particles lo..hi-1, with each particle's strain energy density psi,
         new material and damage state (trial, damage_trial), (variational form) hourglass
         penalty hg_psi and (`corrects`) S_i = VP_i L_i^-1 / V_i; returns the first inverted
         particle or -1."""
         first_bad = -1
+        lanes = lane_block(PENALTY_ROWS)  # the variational penalty's pairs (pair_lanes)
+        held = lane_block(1)[0]  # its sums of V P_i
+        mine = lane_block(1)[0]  # particle i's fs (row by row) and d
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
             if hessian:  # a row of fs at a time, summed in locals (as in gradient_row)
@@ -190,23 +197,30 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                          damage_trial, P, work, F, VP, J, psi, dt) and first_bad < 0:
                 first_bad = i
             if variational:
-                # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P
+                # hourglass "stress" A_i = dPhi/dfs_i = sum_j c_ij E_i e_ij (x) X_ij, added to V P;
+                # the pairs' terms formed lane by lane (penalty_stress_lanes), summed in row
+                # order into `held`, on the stack: the compiler keeps the sums in registers
+                for a in range(dim):
+                    for b in range(dim):
+                        held[3 * a + b] = VP[i, a, b]
+                        mine[3 * a + b] = fs[i, a, b]
+                    mine[9 + a] = d[i, a]
                 phi = 0.0
-                for p in range(ptr[i], ptr[i + 1]):
-                    j = idx[p]
-                    k = hgc[p] * youngs[i]
-                    e0, e1, e2 = separation(X, i, j, dim)
-                    square = 0.0
-                    for a in range(dim):
-                        fx = 0.0
-                        for b in range(dim):
-                            fx += fs[i, a, b] * component(b, e0, e1, e2)
-                        err[a] = fx - component(a, e0, e1, e2) - d[j, a] + d[i, a]
-                        square += err[a] * err[a]
-                    phi += 0.5 * k * square
-                    for a in range(dim):
-                        for b in range(dim):
-                            VP[i, a, b] += k * err[a] * component(b, e0, e1, e2)
+                start = ptr[i]
+                while start < ptr[i + 1]:
+                    stop = min(start + LANES, ptr[i + 1])
+                    for p in range(start, stop):
+                        gather_separation(dim, lanes, p - start, X, i, idx[p], d, hgc[p])
+                    penalty_stress_lanes(dim, lanes, lanes_used(stop - start), mine, youngs[i])
+                    for lane in range(stop - start):
+                        phi += lanes[ENERGY_TERM, lane]
+                        for a in range(dim):
+                            for b in range(dim):
+                                held[3 * a + b] += lanes[STRESS_TERMS + 3 * a + b, lane]
+                    start = stop
+                for a in range(dim):
+                    for b in range(dim):
+                        VP[i, a, b] = held[3 * a + b]
                 hg_psi[i] = phi
             if corrects:
                 corrected_stress(dim, i, VP, VP, False, Linv, measure, S)
@@ -247,7 +261,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
         corrected g_ij it uses particle i's correction for both terms and does not conserve
         linear momentum."""
         pair_form = force_form == FORCE_PAIR
-        lanes = lane_block(LANE_ROWS)  # a row's pairs for the hourglass force (pair_lanes)
+        lanes = lane_block(FORCE_ROWS)  # a row's pairs for the hourglass force (pair_lanes)
         mine = lane_block(1)[0]  # particle i's fs (row by row) and d
         for i in range(lo, hi):
             # the row's sums are kept in locals, (f0, f1, f2) of f_int, (h0, h1, h2) of f_hg and
@@ -391,18 +405,25 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
 
 
 @njit(cache=True, inline="always")
-def gather_pair(dim, lanes, lane, X, i, j, d, fs, youngs, support, hgc):
-    """Pair (i, j)'s data for the hourglass force into column `lane` of the force stage's block:
-    X_ij, d_j, fs_j, E_j, h_j and the pair's coefficient hgc."""
+def gather_separation(dim, lanes, lane, X, i, j, d, hgc):
+    """Pair (i, j)'s X_ij, d_j and coefficient hgc into column `lane` of a stage's block."""
     e0, e1, e2 = separation(X, i, j, dim)
     for a in range(dim):
         lanes[REF + a, lane] = component(a, e0, e1, e2)
         lanes[NEIGHBOUR_D + a, lane] = d[j, a]
+    lanes[HGC, lane] = hgc
+
+
+@njit(cache=True, inline="always")
+def gather_pair(dim, lanes, lane, X, i, j, d, fs, youngs, support, hgc):
+    """Pair (i, j)'s data for the hourglass force into column `lane` of the force stage's block:
+    X_ij, d_j, the coefficient hgc, fs_j, E_j and h_j."""
+    gather_separation(dim, lanes, lane, X, i, j, d, hgc)
+    for a in range(dim):
         for b in range(dim):
             lanes[GRADIENT + 3 * a + b, lane] = fs[j, a, b]
     lanes[YOUNGS, lane] = youngs[j]
     lanes[SUPPORT, lane] = support[j]
-    lanes[HGC, lane] = hgc
 
 
 @njit(cache=True, inline="always")
@@ -454,38 +475,76 @@ def penalty_lanes(dim, lanes, used, mine, youngs_i):
 
 
 @njit(cache=True, inline="always")
+def penalty_stress_lanes(dim, lanes, used, mine, youngs_i):
+    """Lane by lane, a pair's terms of the variational penalty in stage 1: of the hourglass
+    stress A_i = dPhi/dfs_i, k e_ij (x) X_ij (row by row), and of its energy, k |e_ij|^2 / 2,
+    with k = c_ij E_i and e_ij = fs_i X_ij - x_ij (`mine`: fs_i, d_i)."""
+    for lane in range(used):
+        k = lanes[HGC, lane] * youngs_i
+        square = 0.0
+        for a in range(dim):
+            fx = 0.0
+            for b in range(dim):
+                fx += mine[3 * a + b] * lanes[REF + b, lane]
+            error = fx - lanes[REF + a, lane] - lanes[NEIGHBOUR_D + a, lane] + mine[9 + a]
+            square += error * error
+            for b in range(dim):
+                lanes[STRESS_TERMS + 3 * a + b, lane] = k * error * lanes[REF + b, lane]
+        lanes[ENERGY_TERM, lane] = 0.5 * k * square
+
+@njit(cache=True, inline="always")
 def gradient_row(dim, i, base, ptr, idx, g, d, f):
-    """f[i] = I + sum_j (d_j - d_base) (x) g_ij over row i of (ptr, idx, g), a row of f at a
-    time summed in locals (stored once: the same sums, term by term in row order)."""
+    """f[i] = I + sum_j (d_j - d_base) (x) g_ij over row i of (ptr, idx, g), the sums
+    started from I (row_sums)."""
+    s = row_sums(dim, i, base, ptr, idx, g, d, 1.0)
     for a in range(dim):
-        s0, s1, s2 = row_sums(dim, a, i, base, ptr, idx, g, d, 1.0 if a == 0 else 0.0,
-                              1.0 if a == 1 else 0.0, 1.0 if a == 2 else 0.0)
         for b in range(dim):
-            f[i, a, b] = component(b, s0, s1, s2)
+            f[i, a, b] = s[3 * a + b]
 
 
 @njit(cache=True, inline="always")
 def corrected_gradient_row(dim, i, ptr, idx, gw, Linv, d, f):
     """f[i] = I + sum_j (d_j - d_i) (x) g_ij = I + (sum_j (d_j - d_i) (x) gw_ij) L_i^-T over
-    row i, a row of f at a time summed in locals and stored once."""
+    row i (row_sums)."""
+    s = row_sums(dim, i, i, ptr, idx, gw, d, 0.0)
     for a in range(dim):
-        s0, s1, s2 = row_sums(dim, a, i, i, ptr, idx, gw, d, 0.0, 0.0, 0.0)
         for b in range(dim):
             t = 1.0 if a == b else 0.0
             for k in range(dim):
-                t += component(k, s0, s1, s2) * Linv[i, b, k]
+                t += s[3 * a + k] * Linv[i, b, k]
             f[i, a, b] = t
 
 
 @njit(cache=True, inline="always")
-def row_sums(dim, a, i, base, ptr, idx, g, d, s0, s1, s2):
-    """(s0, s1, s2) + sum_j (d_j - d_base)_a g_ij over row i, term by term in row order."""
-    da = d[base, a]
+def row_sums(dim, i, base, ptr, idx, g, d, diagonal):
+    """The sums s_ab = sum_j (d_j - d_base)_a g_ij,b over row i, started from `diagonal` on
+    the diagonal (0 off it), term by term in row order; in one pass, in locals (the nine
+    sums' additions overlap), stored by the caller: row by row as nine scalars, those a
+    lower dimension lacks zero."""
+    s00 = diagonal
+    s11 = diagonal if dim > 1 else 0.0
+    s22 = diagonal if dim > 2 else 0.0
+    s01 = s02 = s10 = s12 = s20 = s21 = 0.0
+    b0 = d[base, 0]
+    b1 = d[base, 1] if dim > 1 else 0.0
+    b2 = d[base, 2] if dim > 2 else 0.0
     for p in range(ptr[i], ptr[i + 1]):
-        du = d[idx[p], a] - da
-        for b in range(dim):
-            s0, s1, s2 = added(b, du * g[p, b], s0, s1, s2)
-    return s0, s1, s2
+        j = idx[p]
+        u0 = d[j, 0] - b0
+        s00 += u0 * g[p, 0]
+        if dim > 1:
+            u1 = d[j, 1] - b1
+            s01 += u0 * g[p, 1]
+            s10 += u1 * g[p, 0]
+            s11 += u1 * g[p, 1]
+        if dim > 2:
+            u2 = d[j, 2] - b2
+            s02 += u0 * g[p, 2]
+            s12 += u1 * g[p, 2]
+            s20 += u2 * g[p, 0]
+            s21 += u2 * g[p, 1]
+            s22 += u2 * g[p, 2]
+    return s00, s01, s02, s10, s11, s12, s20, s21, s22
 
 
 @njit(cache=True, inline="always")
