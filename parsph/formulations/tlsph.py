@@ -269,8 +269,8 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
             # the pair loop stores only to its own block of lanes, so the compiler keeps them
             # and particle i's data in registers (the sums are the same, term by term in row
             # order). (f0, f1, f2): the S terms, times V_i when stored; (t0, t1, t2): the q
-            # terms. The hourglass force's terms are formed lane by lane (spring_lanes,
-            # penalty_lanes) and summed after each block of the row.
+            # terms. The paper hourglass force's terms are formed lane by lane (spring_lanes)
+            # and summed after each block of the row.
             f0 = f1 = f2 = h0 = h1 = h2 = t0 = t1 = t2 = 0.0
             k0 = k1 = k2 = k3 = k4 = k5 = 0.0
             c0 = c1 = c2 = c3 = c4 = c5 = 0.0
@@ -284,7 +284,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             t += VP[i, a, b] * q_sum[i, b]
                     f0, f1, f2 = replaced(a, s, f0, f1, f2)
                     t0, t1, t2 = replaced(a, t, t0, t1, t2)
-            if hourglass != HOURGLASS_OFF:
+            if hourglass == HOURGLASS_PAPER:
                 for a in range(dim):
                     for b in range(dim):
                         mine[3 * a + b] = fs[i, a, b]
@@ -317,65 +317,71 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                             f0, f1, f2 = added(a, s, f0, f1, f2)
                             if hessian:
                                 t0, t1, t2 = added(a, t, t0, t1, t2)
-                    if hourglass != HOURGLASS_OFF:
+                    if hourglass == HOURGLASS_PAPER:
                         gather_pair(dim, lanes, p - start, X, i, j, d, fs, youngs, support, hgc[p])
-                if hourglass == HOURGLASS_PAPER:
-                    spring_lanes(dim, lanes, lanes_used(stop - start), mine, youngs[i], support[i])
-                elif hourglass == HOURGLASS_VARIATIONAL:
-                    penalty_lanes(dim, lanes, lanes_used(stop - start), mine, youngs[i])
-                for lane in range(stop - start if hourglass != HOURGLASS_OFF else 0):
-                    x0, x1, x2 = lanes[SEP, lane], lanes[SEP + 1, lane], lanes[SEP + 2, lane]
-                    if hourglass == HOURGLASS_VARIATIONAL:
-                        h0 += x0
-                        h1 += x1
-                        h2 += x2
-                        k0 += lanes[HGC, lane] * (youngs[i] + lanes[YOUNGS, lane])
-                        continue
-                    r2 = lanes[R2, lane]
-                    r = lanes[DISTANCE, lane]
-                    c = lanes[COEFFICIENT, lane]  # the spring's [G eq. 27, 32], zero where r = 0
-                    p = start + lane
-                    j = idx[p]
-                    yielded = viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET
-                    h = closing = approach = scale = slope = 0.0
-                    if yielded or (viscous and bound and r > 0.0):
-                        h = 0.5 * (support[i] + support[j])
-                        r0 = 0.0
-                        err2 = 0.0
+                    elif hourglass == HOURGLASS_VARIATIONAL:
+                        # direct part of -dPhi/dx_i: -sum_j c_ij (E_i e^i_ij + E_j e^j_ij)
+                        # (formed pair by pair: in lanes it took longer)
+                        e0, e1, e2 = separation(X, i, j, dim)
                         for a in range(dim):
-                            ea = lanes[REF + a, lane]
+                            xa = component(a, e0, e1, e2) + d[j, a] - d[i, a]
                             fi = 0.0
+                            fj = 0.0
                             for b in range(dim):
-                                fi += 0.5 * (fs[i, a, b] + lanes[GRADIENT + 3 * a + b, lane]) * lanes[REF + b, lane]
-                            xa = component(a, x0, x1, x2)
-                            gamma = fi - xa
-                            err2 += gamma * gamma
-                            closing += gamma * xa
-                            approach += xa * (v[j, a] - v[i, a])
-                            r0 += ea * ea
-                        r0 = math.sqrt(r0)
-                        e = max(math.sqrt(err2) / r0, 0.05)
-                        slope = value_and_slope(kind, r0, h, dim)[1]
-                        scale = mass[i] * mass[j] * e * vc[0] * vc[1] / vc[2] * (youngs[i] / vc[3]) * (
-                            youngs[j] / vc[3])
-                        if bound:  # the damper's coefficient on the pair's closing speed, along x_ij
-                            # (a pair not yet yielded too: its damper may switch on within the step)
-                            damped = True
-                            c0, c1, c2, c3, c4, c5 = spring_terms(
-                                scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)), x0, x1, x2,
-                                c0, c1, c2, c3, c4, c5)
-                    if yielded:
-                        c = 0.0
-                        approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
-                        if approach * closing < 0.0:
-                            mu = h * approach / (r + 0.1 * h)
-                            c = -scale * mu * slope / (r + 0.01 * h)
-                    elif bound and r > 0.0:
-                        k0, k1, k2, k3, k4, k5 = spring_terms(hgc[p] * (youngs[i] + youngs[j]) / r2, x0, x1, x2,
-                                                              k0, k1, k2, k3, k4, k5)
-                    h0 += c * x0  # (a pair without a force adds 0.0, which changes no sum)
-                    h1 += c * x1
-                    h2 += c * x2
+                                fi += fs[i, a, b] * component(b, e0, e1, e2)
+                                fj += fs[j, a, b] * component(b, e0, e1, e2)
+                            h0, h1, h2 = added(a, -(hgc[p] * (youngs[i] * (fi - xa) + youngs[j] * (fj - xa))),
+                                               h0, h1, h2)
+                        k0 += hgc[p] * (youngs[i] + youngs[j])
+                if hourglass == HOURGLASS_PAPER:  # the springs' terms in lanes, then summed
+                    spring_lanes(dim, lanes, lanes_used(stop - start), mine, youngs[i], support[i])
+                    for lane in range(stop - start):
+                        x0, x1, x2 = lanes[SEP, lane], lanes[SEP + 1, lane], lanes[SEP + 2, lane]
+                        r2 = lanes[R2, lane]
+                        r = lanes[DISTANCE, lane]
+                        c = lanes[COEFFICIENT, lane]  # the spring's [G eq. 27, 32], zero where r = 0
+                        p = start + lane
+                        j = idx[p]
+                        yielded = viscous and max(plastic[i, int(vc[4])], plastic[j, int(vc[4])]) > VISCOUS_ONSET
+                        h = closing = approach = scale = slope = 0.0
+                        if yielded or (viscous and bound and r > 0.0):
+                            h = 0.5 * (support[i] + support[j])
+                            r0 = 0.0
+                            err2 = 0.0
+                            for a in range(dim):
+                                ea = lanes[REF + a, lane]
+                                fi = 0.0
+                                for b in range(dim):
+                                    fi += 0.5 * (fs[i, a, b] + lanes[GRADIENT + 3 * a + b, lane]) * lanes[REF + b, lane]
+                                xa = component(a, x0, x1, x2)
+                                gamma = fi - xa
+                                err2 += gamma * gamma
+                                closing += gamma * xa
+                                approach += xa * (v[j, a] - v[i, a])
+                                r0 += ea * ea
+                            r0 = math.sqrt(r0)
+                            e = max(math.sqrt(err2) / r0, 0.05)
+                            slope = value_and_slope(kind, r0, h, dim)[1]
+                            scale = mass[i] * mass[j] * e * vc[0] * vc[1] / vc[2] * (youngs[i] / vc[3]) * (
+                                youngs[j] / vc[3])
+                            if bound:  # the damper's coefficient on the pair's closing speed, along x_ij
+                                # (a pair not yet yielded too: its damper may switch on within the step)
+                                damped = True
+                                c0, c1, c2, c3, c4, c5 = spring_terms(
+                                    scale * h * abs(slope) / ((r + 0.1 * h) ** 2 * (r + 0.01 * h)), x0, x1, x2,
+                                    c0, c1, c2, c3, c4, c5)
+                        if yielded:
+                            c = 0.0
+                            approach = min(max(approach / (r + 0.1 * h), -0.01 * vc[1]), 0.01 * vc[1])
+                            if approach * closing < 0.0:
+                                mu = h * approach / (r + 0.1 * h)
+                                c = -scale * mu * slope / (r + 0.01 * h)
+                        elif bound and r > 0.0:
+                            k0, k1, k2, k3, k4, k5 = spring_terms(hgc[p] * (youngs[i] + youngs[j]) / r2, x0, x1, x2,
+                                                                  k0, k1, k2, k3, k4, k5)
+                        h0 += c * x0  # (a pair without a force adds 0.0, which changes no sum)
+                        h1 += c * x1
+                        h2 += c * x2
                 start = stop
             for a in range(dim):
                 if force_form == FORCE_RLM:
@@ -456,22 +462,6 @@ def spring_lanes(dim, lanes, used, mine, youngs_i, support_i):
         lanes[R2, lane] = r2
         lanes[DISTANCE, lane] = r
         lanes[COEFFICIENT, lane] = c if r > 0.0 else 0.0
-
-
-@njit(cache=True, inline="always")
-def penalty_lanes(dim, lanes, used, mine, youngs_i):
-    """Lane by lane, the variational penalty's direct force on particle i from each pair,
-    -c_ij (E_i e^i_ij + E_j e^j_ij), e^i_ij = fs_i X_ij - x_ij, into the rows of x_ij."""
-    for lane in range(used):
-        for a in range(dim):
-            xa = lanes[REF + a, lane] + lanes[NEIGHBOUR_D + a, lane] - mine[9 + a]
-            fi = 0.0
-            fj = 0.0
-            for b in range(dim):
-                eb = lanes[REF + b, lane]
-                fi += mine[3 * a + b] * eb
-                fj += lanes[GRADIENT + 3 * a + b, lane] * eb
-            lanes[SEP + a, lane] = -(lanes[HGC, lane] * (youngs_i * (fi - xa) + lanes[YOUNGS, lane] * (fj - xa)))
 
 
 @njit(cache=True, inline="always")
