@@ -93,10 +93,10 @@ VISCOUS_ONSET = 1.0e-3
 # (docs/notes/2026-12-05-pair-data-memory.md).
 STAGE_MATH = {"nsz"}
 # the rows of the stages' blocks of a row's pairs (pair_lanes). Gathered for both hourglass
-# forms: X_ij, d_j and the pair's coefficient c_ij. The force stage's: gathered, fs_j (row by
-# row), E_j and h_j; formed, x_ij (the variational form: its direct force), |x_ij|^2, |x_ij|
-# and the spring's coefficient. The variational penalty's, in stage 1: formed, the pair's
-# terms of the hourglass stress (row by row) and of the penalty energy.
+# forms: X_ij, d_j and the pair's coefficient c_ij. The paper springs', in the force stage:
+# gathered, fs_j (row by row), E_j and h_j; formed, x_ij, |x_ij|^2, |x_ij| and the spring's
+# coefficient. The variational penalty's, in stage 1: formed, the pair's terms of the
+# hourglass stress (row by row) and of the penalty energy.
 REF, NEIGHBOUR_D, HGC = 0, 3, 6
 GRADIENT, YOUNGS, SUPPORT, SEP, R2, DISTANCE, COEFFICIENT = 7, 16, 17, 18, 21, 22, 23
 FORCE_ROWS = 24
@@ -179,7 +179,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
         mine = lane_block(1)[0]  # particle i's fs (row by row) and d
         for i in range(lo, hi):
             # fs: gradient of the motion from the reference, stabilised [V eq. 17, 21] if enabled
-            if hessian:  # a row of fs at a time, summed in locals (as in gradient_row)
+            if hessian:  # a row of fs at a time, summed in locals
                 for a in range(dim):
                     s0 = f[i, a, 0]
                     s1 = f[i, a, 1] if dim > 1 else 0.0
@@ -435,9 +435,12 @@ def gather_pair(dim, lanes, lane, X, i, j, d, fs, youngs, support, hgc):
 @njit(cache=True, inline="always")
 def spring_lanes(dim, lanes, used, mine, youngs_i, support_i):
     """Lane by lane, particle i's pairs' x_ij = X_ij + d_j - d_i, |x_ij|^2, |x_ij| and the
-    coefficient c of the paper's hourglass force c x_ij [G eq. 27, 32] (zero where x_ij = 0):
+    coefficient c of the paper's hourglass force c x_ij [G eq. 27, 32], the errors projected on
+    the current separation, a central force:
     c = -c_ij (E_i delta^i + E_j delta^j) / (|x_ij| (|x_ij| + 0.1 h_ij)),
-    delta^i = (fs_i X_ij - x_ij) . x_ij, h_ij the pair's mean support (`mine`: fs_i, d_i)."""
+    delta^i = (fs_i X_ij - x_ij) . x_ij, the regularising length 0.1 h_ij with h_ij the pair's
+    mean support (`mine`: fs_i, d_i). Where x_ij = 0 (coinciding particles: a wall's
+    projection) c is zero, the force's limit."""
     for lane in range(used):
         r2 = 0.0
         for a in range(dim):
@@ -481,6 +484,7 @@ def penalty_stress_lanes(dim, lanes, used, mine, youngs_i):
             for b in range(dim):
                 lanes[STRESS_TERMS + 3 * a + b, lane] = k * error * lanes[REF + b, lane]
         lanes[ENERGY_TERM, lane] = 0.5 * k * square
+
 
 @njit(cache=True, inline="always")
 def gradient_row(dim, i, base, ptr, idx, g, d, f):
