@@ -210,14 +210,18 @@ class Recorder:
         return call
 
     def __enter__(self):
-        for module in _parsph_modules():
-            for name, value in list(vars(module).items()):
-                if isinstance(value, CPUDispatcher):
-                    self.patched.append((module, name, value))
-                    setattr(module, name, self._wrap(value))
-        for once in _compiled_once():
-            self.patched.append((once, "kernel", once.kernel))
-            once.kernel = self._wrap(once.kernel)
+        try:
+            for module in _parsph_modules():
+                for name, value in list(vars(module).items()):
+                    if isinstance(value, CPUDispatcher):
+                        self.patched.append((module, name, value))
+                        setattr(module, name, self._wrap(value))
+            for once in _compiled_once():
+                self.patched.append((once, "kernel", once.kernel))
+                once.kernel = self._wrap(once.kernel)
+        except BaseException:  # nothing is left wrapped: the compiled code's globals are its own again
+            self.__exit__()
+            raise
         return self
 
     def __exit__(self, *exc):
@@ -229,7 +233,9 @@ class Recorder:
 def _compiled_once() -> list:
     import gc
 
-    return [obj for obj in gc.get_objects() if isinstance(obj, CompiledOnce)]
+    # by type, not isinstance: that would ask a weak proxy among the objects for its referent,
+    # which may be gone
+    return [obj for obj in gc.get_objects() if type(obj) is CompiledOnce]
 
 
 def traffic(args: tuple) -> int:

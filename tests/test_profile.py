@@ -7,7 +7,7 @@ import numpy as np
 from numba import njit
 
 from conftest import RUNS, parsph
-from parsph.profile import Call, count_flops, traffic
+from parsph.profile import Call, Recorder, count_flops, traffic
 
 
 @njit
@@ -52,3 +52,31 @@ def test_a_profiled_run_prints_the_stage_table_and_computes_the_same(tmp_path):
 
     a, b = read_history(str(tmp_path / "plain" / "history.h5")), read_history(str(tmp_path / "profiled" / "history.h5"))
     assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def test_the_recorder_passes_dead_weak_proxies_and_leaves_nothing_wrapped():
+    """The recorder finds the stage kernels among all live objects; a weak proxy whose
+    referent is gone is among them in a long process (the test suite's workers) and must not
+    stop it, and after it every compiled function is its own again."""
+    import gc
+    import weakref
+
+    from numba.core.registry import CPUDispatcher
+
+    from parsph.formulations import tlsph
+    from physics import simulation
+
+    class Referent:
+        pass
+
+    referent = Referent()
+    proxy = weakref.proxy(referent)
+    del referent
+    gc.collect()
+    sim = simulation("bar1d")
+    sim.step()
+    with Recorder(sim) as recorder:
+        sim.step()
+    assert any(call.kernel.py_func.__name__ == "forces" for call in recorder.calls)
+    assert isinstance(tlsph.corrected_gradient_row, CPUDispatcher)
+    assert type(proxy) is weakref.ProxyType

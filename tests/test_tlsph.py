@@ -264,9 +264,8 @@ def test_the_compiled_stages_give_the_bits_of_their_python_sources(case, kernel)
         sim.state.u[:] = 0.01 * rng.standard_normal(sim.state.u.shape)
         sim.state.v[:] = 0.5 * rng.standard_normal(sim.state.v.shape)
         sim.compute_forces()
-    else:
-        for _ in range(60):
-            sim.step()
+    for _ in range(60 if case == "taylor viscous" else 1):  # (every kernel of a step compiled)
+        sim.step()
     call = _stage_call(sim, kernel)
     names = list(inspect.signature(call.kernel.py_func).parameters)
     args = list(call.args)
