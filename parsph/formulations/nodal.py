@@ -131,6 +131,7 @@ class NodalFormulation(Formulation):
             tlsph.REFERENCE_UPDATED if self.updated else tlsph.REFERENCE_INITIAL
         viscous = self.absorbs_hourglass_work and self.plastic_hourglass == "viscous"
         self.damped = viscous
+        self.stage_one_corrects = tlsph.stage_one_corrects(tlsph.FORCE_FORMS[force], self.eta > 0, reference)
         self.gradient, self.kinematics_stress, self.hessian_transpose, self.forces = tlsph.compile_stages(
             dim, law, tlsph.FORCE_FORMS[force], self.hourglass_form, reference, self.eta > 0, failure, viscous)
 
@@ -209,9 +210,9 @@ class NodalFormulation(Formulation):
         states = tuple(name for name in (body.law.state, "damage" if body.failure else None)
                        if name)
         trials = tuple(name + "_trial" for name in states)  # the new states it computes
-        corrects = self.corrected_stress and not hessian and not self.eulerian  # it forms the force row's S
         out.append(Stage("kinematics+stress", kinematics_stress, reads=tuple(fields[p] for p in neighbours),
-                         writes=("fs", "F", "VP", "J", "psi", "hg_psi") + (("S",) if corrects else ()) + trials))
+                         writes=("fs", "F", "VP", "J", "psi", "hg_psi") + (("S",) if self.stage_one_corrects else ())
+                         + trials))
         if hessian:
             def hessian_transpose():
                 ref = body.relation.ref

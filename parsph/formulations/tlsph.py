@@ -124,12 +124,18 @@ def compile_stages(dim: int, law: int, force_form: int, hourglass: int, referenc
     stabilisation.
     """
     gradient, hessian_transpose = _hessian_passes(dim)
-    # S is formed with the stress unless the stabilisation's B enters it (`hessian_transpose`) or
-    # the reference moves between the stages (`corrected_stresses`, once it has moved)
     kinematics_stress = _stress_stage(dim, law, hourglass == HOURGLASS_VARIATIONAL, reference, hessian, failure,
-                                      force_form != FORCE_RLM and not hessian and reference != REFERENCE_CURRENT)
+                                      stage_one_corrects(force_form, hessian, reference))
     forces = _force_stage(dim, force_form, hourglass, hessian, viscous)
     return gradient, kinematics_stress, hessian_transpose, forces
+
+
+def stage_one_corrects(force_form: int, hessian: bool, reference: int) -> bool:
+    """Whether stage 1 forms the force row's S = V P L^-1 / V with the stress: not for RLM's
+    row (it reads V P), nor where the stabilisation's B enters S (`hessian_transpose` forms
+    it) or the reference moves between the stages (an Eulerian kernel: `corrected_stresses`
+    forms it once the reference has moved)."""
+    return force_form != FORCE_RLM and not hessian and reference != REFERENCE_CURRENT
 
 
 @functools.lru_cache(maxsize=None)
@@ -203,8 +209,7 @@ def _stress_stage(dim: int, law: int, variational: bool, reference: int, hessian
                 for a in range(dim):
                     for b in range(dim):
                         held[3 * a + b] = VP[i, a, b]
-                        mine[3 * a + b] = fs[i, a, b]
-                    mine[9 + a] = d[i, a]
+                particle_block(dim, i, fs, d, mine)
                 phi = 0.0
                 start = ptr[i]
                 while start < ptr[i + 1]:
@@ -285,10 +290,7 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                     f0, f1, f2 = replaced(a, s, f0, f1, f2)
                     t0, t1, t2 = replaced(a, t, t0, t1, t2)
             if hourglass == HOURGLASS_PAPER:
-                for a in range(dim):
-                    for b in range(dim):
-                        mine[3 * a + b] = fs[i, a, b]
-                    mine[9 + a] = d[i, a]
+                particle_block(dim, i, fs, d, mine)
             start = ptr[i]
             while start < ptr[i + 1]:  # the row LANES pairs at a time (pair_lanes)
                 stop = min(start + LANES, ptr[i + 1])
@@ -408,6 +410,16 @@ def _force_stage(dim: int, force_form: int, hourglass: int, hessian: bool, visco
                 omega_hg2[i] = 2.0 * k0 / mass[i]
 
     return CompiledOnce(forces, f"{COMPILED_SOURCE} {dim} {force_form} {hourglass} {hessian} {viscous}")
+
+
+@njit(cache=True, inline="always")
+def particle_block(dim, i, fs, d, mine):
+    """Particle i's fs (row by row) and d into `mine`, the block the lane passes read them from
+    (loads the compiler cannot then mistake for per-lane ones)."""
+    for a in range(dim):
+        for b in range(dim):
+            mine[3 * a + b] = fs[i, a, b]
+        mine[9 + a] = d[i, a]
 
 
 @njit(cache=True, inline="always")
